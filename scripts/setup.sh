@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# One-command setup for a fresh Debian (bookworm) machine, run as root from the repo root.
+#   1. Vulkan software rendering: libvulkan1 + mesa-vulkan-drivers 25.x from bookworm-backports
+#      (stable's mesa 22.3 lavapipe lacks descriptorBindingPartiallyBound; SAPIEN then finds
+#      no rendering device). The backports suite uses the mirror URI the machine's own Debian
+#      sources already use.
+#   2. A virtual environment in .venv with torch 2.13.0 (CPU) installed first, then the package.
+#   3. Warm the Warp kernel cache so the first episode does not pay ~40 s of compilation.
+# Idempotent: a second run checks each step and skips it.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+VENV=${SOFTVT_VENV:-$ROOT/.venv}
+SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+
+log() { printf '[setup] %s\n' "$*"; }
+
+# ---------------------------------------------------------------- 1. apt
+codename=$(. /etc/os-release && echo "${VERSION_CODENAME:-bookworm}")
+mesa_major=$(dpkg-query -W -f='${Version}' mesa-vulkan-drivers 2>/dev/null | sed -E 's/^([0-9]+:)?([0-9]+).*/\2/' || true)
+if [ "${mesa_major:-0}" -ge 25 ] 2>/dev/null && dpkg-query -W libvulkan1 >/dev/null 2>&1; then
+  log "mesa-vulkan-drivers ${mesa_major}.x already installed"
+else
+  bp=/etc/apt/sources.list.d/${codename}-backports.sources
+  if ! grep -rqs "${codename}-backports" /etc/apt/sources.list /etc/apt/sources.list.d/; then
+    # The mirror URI of the machine's own main Debian suite (deb822 stanzas or one-line form).
+    uri=$( { awk -v s="$codename" 'BEGIN{RS=""} $0 ~ "Suites:[^\n]*(^|[ \t])" s "([ \t]|$)" \
+               { if (match($0, /URIs:[ \t]*[^ \t\n]+/)) { u=substr($0,RSTART,RLENGTH); sub(/URIs:[ \t]*/,"",u); print u } }' \
+               /etc/apt/sources.list.d/*.sources 2>/dev/null || true
+             awk -v s="$codename" '$1=="deb" && $3==s {print $2}' /etc/apt/sources.list 2>/dev/null || true
+           } | head -n 1)
+    [ -n "$uri" ] || { echo "setup: no Debian mirror found in /etc/apt sources; add one, then re-run" >&2; exit 1; }
+    log "adding ${codename}-backports from $uri"
+    printf 'Types: deb\nURIs: %s\nSuites: %s-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' \
+      "$uri" "$codename" | $SUDO tee "$bp" >/dev/null
+  fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq -t "${codename}-backports" \
+    libvulkan1 mesa-vulkan-drivers >/dev/null
+  log "installed mesa-vulkan-drivers $(dpkg-query -W -f='${Version}' mesa-vulkan-drivers)"
+fi
+
+# ---------------------------------------------------------------- 2. venv + pip
+stamp="$VENV/.softvt-installed"
+want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
+if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+  log "virtual environment $VENV up to date"
+else
+  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  # CPU torch first: otherwise mani-skill's torch requirement pulls a CUDA build.
+  "$VENV/bin/python" -m pip install -q torch==2.13.0
+  "$VENV/bin/python" -m pip install -q -e ".[dev]"
+  echo "$want" > "$stamp"
+  log "installed the package into $VENV"
+fi
+
+# ---------------------------------------------------------------- 3. Warp kernel cache
+"$VENV/bin/python" -m mani_skill_softvt.warmup
+log "done. Activate with: source $VENV/bin/activate"
