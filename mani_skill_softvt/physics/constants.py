@@ -1,0 +1,34 @@
+"""Physics constants of the SAPIEN <-> Newton coupling (SI units).
+
+Values come from SPEC sections 2-3 (measured on this project's machines) unless noted.
+"""
+
+import numpy as np
+
+# Lockstep rate: SAPIEN and Newton both step at SIM_FREQ, one Newton step per SAPIEN step.
+# 100 Hz with Newton substeps was unstable (15 g fingers, one-step-late contact forces).
+SIM_FREQ = 240
+CONTROL_FREQ = 20
+SIM_STEPS_PER_CONTROL = SIM_FREQ // CONTROL_FREQ
+
+# VBD iterations per Newton step.
+VBD_ITERATIONS = 8
+# Friction smoothing velocity [m/s]: 1e-2 lets a held object creep ~1 mm/s.
+FRICTION_EPSILON = 1e-3
+
+# Particle-collider contact (penalty) stiffness [N/m] and damping, per contact point.
+SOFT_CONTACT_KE = 2.0e4
+SOFT_CONTACT_KD = 1.0e-2
+# Contact radius of FEM nodes [m]; Newton's default (0.1 m) would make 10 cm thick skins.
+PARTICLE_RADIUS = 1.0e-3
+# Contact detection margin [m].
+SOFT_CONTACT_GAP = 4.0e-3
+
+DEFAULT_TET_DAMPING = 1.0  # Pa*s
+DEFAULT_OBJECT_FRICTION = 1.0
+
+# Health checks.
+MAX_PARTICLE_SPEED = 5.0  # m/s: nothing in a tabletop pick-and-place moves this fast
+MIN_TET_VOLUME_RATIO = 0.02  # a tet squashed below 2 % of its rest volume counts as collapsed
+
+IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])  # SAPIEN order [p, q_wxyz]

@@ -1,0 +1,494 @@
+"""Volumetric FEM soft bodies in Newton (SolverVBD) with kinematic colliders.
+
+``SoftBodyWorld`` owns one Newton model: the tetrahedral soft objects of a scene and the
+rigid colliders (finger pads, hand, table top, containers) whose poses another simulator
+(SAPIEN) dictates. Each :meth:`SoftBodyWorld.step` advances the soft bodies one time step
+with the colliders moved to their new poses, and returns the contact wrench that the soft
+bodies exert on every collider, so the caller can push it back into the rigid simulator.
+
+Why this shape:
+- Newton integrates only the particles (``integrate_with_external_rigid_solver=True``): the
+  colliders' start-of-step poses go into the input state, end-of-step poses into the output
+  state, and VBD uses both for contact and friction (velocity from the pose difference).
+- The whole step (collision detection, VBD iterations, wrench reduction) is captured once as
+  a Warp CPU graph and replayed, which removes most Python launch overhead.
+- Material and mass are rescaled in place (OOD conditions) without recompiling kernels.
+
+Units: SI. Poses: Newton order ``[p, q_xyzw]`` internally; callers use SAPIEN order and convert
+through :mod:`mani_skill_softvt.physics.transforms`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..paths import WARP_CACHE_DIR
+from . import constants as C
+from .transforms import sapien_pose_to_newton
+
+os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
+
+import warp as wp  # noqa: E402
+
+wp.config.quiet = True
+wp.config.kernel_cache_dir = os.environ["WARP_CACHE_PATH"]
+
+import newton  # noqa: E402
+
+
+class SimulationInstabilityError(RuntimeError):
+    """The FEM simulation left its valid regime (NaN, inverted tets, exploding velocities)."""
+
+
+@dataclass(frozen=True)
+class SoftMaterial:
+    """Elastic material of a soft body (SI units)."""
+
+    youngs_modulus: float  # Pa
+    poisson_ratio: float
+    density: float  # kg/m^3
+    damping: float = C.DEFAULT_TET_DAMPING  # Pa*s, viscous damping of the strain rate (VBD k_damp)
+    friction: float = C.DEFAULT_OBJECT_FRICTION
+
+    def __post_init__(self):
+        if not self.youngs_modulus > 0:
+            raise ValueError(f"Young's modulus must be > 0 Pa, got {self.youngs_modulus}")
+        if not -1.0 < self.poisson_ratio < 0.5:
+            raise ValueError(f"Poisson ratio must lie in (-1, 0.5), got {self.poisson_ratio}")
+        if not self.density > 0:
+            raise ValueError(f"density must be > 0 kg/m^3, got {self.density}")
+        if self.damping < 0 or self.friction < 0:
+            raise ValueError("damping and friction must be non-negative")
+
+
+def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
+    """(mu, lambda) Lame parameters of an isotropic material."""
+    e, nu = youngs_modulus, poisson_ratio
+    return e / (2.0 * (1.0 + nu)), e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+def tet_volumes(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volumes of tetrahedra (positive for the orientation Newton expects)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    a, b, c, d = (v[tets[:, i]] for i in range(4))
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
+
+
+def lumped_node_masses(vertices: np.ndarray, tets: np.ndarray, density: float) -> np.ndarray:
+    """Lumped FEM masses: each tet gives a quarter of density*volume to each of its nodes."""
+    m = np.zeros(len(vertices))
+    np.add.at(m, np.asarray(tets).reshape(-1), np.repeat(density * tet_volumes(vertices, tets) / 4.0, 4))
+    return m
+
+
+@dataclass
+class SoftBodyHandle:
+    """Where a soft body lives inside the Newton model."""
+
+    name: str
+    particle_start: int
+    particle_count: int
+    tet_start: int
+    tet_count: int
+    material: SoftMaterial
+    rest_vertices: np.ndarray  # local frame (N, 3)
+    tets: np.ndarray  # local indices (M, 4)
+
+
+@dataclass
+class ColliderHandle:
+    name: str
+    body: int
+    shapes: list[int] = field(default_factory=list)
+
+
+@wp.kernel
+def _sum_soft_contact_wrenches(
+    soft_contact_count: wp.array[wp.int32],
+    soft_contact_shape: wp.array[wp.int32],
+    shape_body: wp.array[wp.int32],
+    contact_f: wp.array[wp.spatial_vector],
+    soft_row_offset: int,
+    body_wrench: wp.array[wp.spatial_vector],
+):
+    # Serial on CPU, so the reduction order (and the result) is deterministic.
+    tid = wp.tid()
+    if tid >= soft_contact_count[0]:
+        return
+    shape = soft_contact_shape[tid]
+    if shape < 0:
+        return
+    body = shape_body[shape]
+    if body < 0:
+        return
+    wp.atomic_add(body_wrench, body, contact_f[soft_row_offset + tid])
+
+
+class SoftBodyWorld:
+    """A Newton model holding soft FEM bodies and kinematic colliders.
+
+    Build: :meth:`add_soft_body`, :meth:`add_collider_box` / :meth:`add_collider_convex`, then
+    :meth:`finalize`. Run: :meth:`set_collider_poses` then :meth:`step` every physics tick.
+    """
+
+    def __init__(
+        self,
+        dt: float = 1.0 / C.SIM_FREQ,
+        iterations: int = C.VBD_ITERATIONS,
+        gravity: float = -9.81,
+        contact_ke: float = C.SOFT_CONTACT_KE,
+        contact_kd: float = C.SOFT_CONTACT_KD,
+        particle_radius: float = C.PARTICLE_RADIUS,
+        contact_gap: float = C.SOFT_CONTACT_GAP,
+        use_graph: bool = True,
+        device: str = "cpu",
+    ):
+        wp.init()
+        self.dt = float(dt)
+        self.iterations = int(iterations)
+        self.contact_ke, self.contact_kd = float(contact_ke), float(contact_kd)
+        self.particle_radius = float(particle_radius)
+        self.contact_gap = float(contact_gap)
+        self.use_graph = use_graph
+        self.device = wp.get_device(device)
+        self.builder = newton.ModelBuilder(gravity=gravity)
+        self.soft_bodies: list[SoftBodyHandle] = []
+        self.colliders: list[ColliderHandle] = []
+        self.model = None
+        self.time = 0.0
+
+    # ------------------------------------------------------------------ building
+    def add_soft_body(
+        self,
+        name: str,
+        vertices: np.ndarray,
+        tets: np.ndarray,
+        material: SoftMaterial,
+        pose: np.ndarray = C.IDENTITY_POSE,
+    ) -> SoftBodyHandle:
+        """Add a tetrahedral body. ``vertices`` in its local frame, ``pose`` SAPIEN order [p, q_wxyz]."""
+        self._require_building()
+        vertices = np.asarray(vertices, dtype=np.float64)
+        tets = np.asarray(tets, dtype=np.int32)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4:
+            raise ValueError(f"soft body '{name}': need vertices (N,3) and tets (M,4), got {vertices.shape}, {tets.shape}")
+        if tets.min() < 0 or tets.max() >= len(vertices):
+            raise ValueError(f"soft body '{name}': tet indices out of range [0, {len(vertices)})")
+        vols = tet_volumes(vertices, tets)
+        if vols.min() <= 0:
+            raise ValueError(
+                f"soft body '{name}': {int((vols <= 0).sum())} inverted or degenerate tets; "
+                "re-mesh the object (mani_skill_softvt.assets.tetmesh)"
+            )
+        mu, lam = lame_parameters(material.youngs_modulus, material.poisson_ratio)
+        b = self.builder
+        p0, t0 = len(b.particle_q), len(b.tet_indices)
+        pose = sapien_pose_to_newton(pose)
+        b.add_soft_mesh(
+            pos=wp.vec3(*pose[:3]),
+            rot=wp.quat(*pose[3:7]),
+            scale=1.0,
+            vel=wp.vec3(0.0, 0.0, 0.0),
+            vertices=[wp.vec3(*v) for v in vertices],
+            indices=tets.reshape(-1).tolist(),
+            density=material.density,
+            k_mu=mu,
+            k_lambda=lam,
+            k_damp=material.damping,
+            particle_radius=self.particle_radius,
+            add_surface_mesh_edges=False,
+            label=name,
+        )
+        # Newton's lumping does not sum to density*volume for every mesh: impose the FEM lumped
+        # mass so that the body weighs exactly density * volume.
+        masses = lumped_node_masses(vertices, tets, material.density)
+        for i, m in enumerate(masses):
+            b.particle_mass[p0 + i] = float(m)
+        h = SoftBodyHandle(name, p0, len(vertices), t0, len(tets), material, vertices, tets)
+        self.soft_bodies.append(h)
+        return h
+
+    def _new_collider(self, name: str) -> ColliderHandle:
+        self._require_building()
+        if any(c.name == name for c in self.colliders):
+            raise ValueError(f"collider '{name}' already exists")
+        body = self.builder.add_body(xform=wp.transform_identity(), mass=0.0, is_kinematic=True, label=name)
+        h = ColliderHandle(name, body)
+        self.colliders.append(h)
+        return h
+
+    def _shape_cfg(self, friction: float) -> newton.ModelBuilder.ShapeConfig:
+        cfg = newton.ModelBuilder.ShapeConfig(
+            density=0.0, mu=friction, ke=self.contact_ke, kd=self.contact_kd, gap=self.contact_gap
+        )
+        # Colliders are posed by SAPIEN; only their contacts with the soft particles matter here.
+        cfg.has_shape_collision = False
+        cfg.has_particle_collision = True
+        return cfg
+
+    def add_collider_box(self, name: str, half_extents, local_pose=C.IDENTITY_POSE, friction: float = 1.0):
+        """A kinematic box collider; ``local_pose`` places the box in the collider's frame."""
+        h = self._new_collider(name)
+        lp = sapien_pose_to_newton(local_pose)
+        s = self.builder.add_shape_box(
+            h.body,
+            xform=wp.transform(wp.vec3(*lp[:3]), wp.quat(*lp[3:7])),
+            hx=float(half_extents[0]),
+            hy=float(half_extents[1]),
+            hz=float(half_extents[2]),
+            cfg=self._shape_cfg(friction),
+            label=f"{name}/box",
+        )
+        h.shapes.append(s)
+        return h
+
+    def add_collider_boxes(self, name: str, boxes, friction: float = 1.0):
+        """A kinematic collider made of several boxes: ``[(half_extents, local_pose), ...]``."""
+        h = self._new_collider(name)
+        for i, (he, local_pose) in enumerate(boxes):
+            lp = sapien_pose_to_newton(local_pose)
+            h.shapes.append(
+                self.builder.add_shape_box(
+                    h.body,
+                    xform=wp.transform(wp.vec3(*lp[:3]), wp.quat(*lp[3:7])),
+                    hx=float(he[0]), hy=float(he[1]), hz=float(he[2]),
+                    cfg=self._shape_cfg(friction),
+                    label=f"{name}/box{i}",
+                )
+            )
+        return h
+
+    def add_collider_convex(self, name: str, parts, friction: float = 1.0):
+        """A kinematic collider made of convex parts: list of (vertices (N,3), faces (F,3))."""
+        h = self._new_collider(name)
+        for i, (v, f) in enumerate(parts):
+            mesh = newton.Mesh(np.asarray(v, np.float32), np.asarray(f, np.int32).reshape(-1))
+            h.shapes.append(
+                self.builder.add_shape_convex_hull(h.body, mesh=mesh, cfg=self._shape_cfg(friction), label=f"{name}/part{i}")
+            )
+        return h
+
+    def _require_building(self):
+        if self.model is not None:
+            raise RuntimeError("SoftBodyWorld is finalized; add bodies and colliders before finalize()")
+
+    # ------------------------------------------------------------------ finalize
+    def finalize(self) -> None:
+        if not self.soft_bodies:
+            raise ValueError("SoftBodyWorld needs at least one soft body before finalize()")
+        self.builder.color()
+        self.model = m = self.builder.finalize(device=self.device)
+        # Particle-side contact material; VBD averages it with each shape's own.
+        m.soft_contact_ke = self.contact_ke
+        m.soft_contact_kd = self.contact_kd
+        m.soft_contact_mu = float(self.soft_bodies[0].material.friction)
+        self.pipeline = newton.CollisionPipeline(m, broad_phase="nxn", soft_contact_gap=self.contact_gap)
+        self.contacts = self.pipeline.contacts()
+        self.solver = newton.solvers.SolverVBD(
+            m,
+            iterations=self.iterations,
+            friction_epsilon=C.FRICTION_EPSILON,
+            integrate_with_external_rigid_solver=True,
+        )
+        self.state_in = m.state()
+        self.state_out = m.state()
+        self.control = m.control()
+        self.observables = self.solver.observables(
+            [newton.solvers.SolverBase.ObservableKind.CONTACT_F], contacts=self.contacts
+        )
+        self._soft_row_offset = int(self.contacts.rigid_contact_max)
+        self.body_wrench = wp.zeros(m.body_count, dtype=wp.spatial_vector, device=self.device)
+        self._collider_q = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (m.body_count, 1))
+        self._nominal_tet_materials = m.tet_materials.numpy().copy()
+        self._nominal_particle_mass = m.particle_mass.numpy().copy()
+        self._rest_q = m.particle_q.numpy().copy()
+        self._graph = None
+        self.material_scale = {"youngs_modulus": 1.0, "mass": 1.0}
+
+    # ------------------------------------------------------------------ stepping
+    def _simulate(self):
+        self.body_wrench.zero_()
+        self.state_in.clear_forces()
+        self.pipeline.collide(self.state_in, self.contacts)
+        self.solver.step(
+            self.state_in, self.state_out, self.control, self.contacts, self.dt, observables=self.observables
+        )
+        wp.launch(
+            _sum_soft_contact_wrenches,
+            dim=self.contacts.soft_contact_max,
+            inputs=[
+                self.contacts.soft_contact_count,
+                self.contacts.soft_contact_shape,
+                self.model.shape_body,
+                self.observables.contact_f,
+                self._soft_row_offset,
+            ],
+            outputs=[self.body_wrench],
+            device=self.device,
+        )
+        # Ping-pong by copy so that a captured graph always reads state_in and writes state_out.
+        wp.copy(self.state_in.particle_q, self.state_out.particle_q)
+        wp.copy(self.state_in.particle_qd, self.state_out.particle_qd)
+
+    def set_collider_poses(self, poses: np.ndarray) -> None:
+        """End-of-step poses of all colliders, SAPIEN order (n_colliders, 7), in collider order."""
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.shape != (len(self.colliders), 7) or not np.all(np.isfinite(poses)):
+            raise ValueError(f"collider poses must be finite, shape ({len(self.colliders)}, 7); got {poses.shape}")
+        q = np.zeros_like(self._collider_q)
+        q[[c.body for c in self.colliders]] = sapien_pose_to_newton(poses).astype(np.float32)
+        self._pending_q = q
+
+    def reset_collider_poses(self, poses: np.ndarray) -> None:
+        """Teleport colliders (no velocity): start and end poses of the next step both equal ``poses``."""
+        self.set_collider_poses(poses)
+        self._collider_q = self._pending_q
+
+    def step(self) -> np.ndarray:
+        """Advance one time step; returns the contact wrench on each collider, (n_colliders, 6).
+
+        Row layout: [force (3), torque about the collider frame origin (3)], world frame, N and N*m.
+        """
+        if self.model is None:
+            raise RuntimeError("call finalize() before step()")
+        new_q = getattr(self, "_pending_q", self._collider_q)
+        qd = np.zeros((len(new_q), 6), np.float32)
+        qd[:, :3] = (new_q[:, :3] - self._collider_q[:, :3]) / self.dt  # Newton: linear first
+        qd[:, 3:] = _angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
+        self.state_in.body_q.assign(self._collider_q)
+        self.state_out.body_q.assign(new_q)
+        self.state_in.body_qd.assign(qd)
+        self.state_out.body_qd.assign(qd)
+        if self.use_graph and self.device.is_cpu or self.use_graph and self.device.is_cuda:
+            if self._graph is None:
+                # First step uncaptured: lets the solver size its contact buffers before capture.
+                self._simulate()
+                with wp.ScopedCapture(device=self.device) as cap:
+                    self._simulate()
+                self._graph = cap.graph
+                # The capture above also executed on CPU? Warp CPU capture records without running.
+            else:
+                wp.capture_launch(self._graph)
+        else:
+            self._simulate()
+        self._collider_q = new_q
+        self._pending_q = new_q
+        self.time += self.dt
+        w = self.body_wrench.numpy()[[c.body for c in self.colliders]].astype(np.float64)
+        return w
+
+    # ------------------------------------------------------------------ state access
+    def particle_q(self, body: int | SoftBodyHandle = 0) -> np.ndarray:
+        h = self._handle(body)
+        return self.state_in.particle_q.numpy()[h.particle_start : h.particle_start + h.particle_count].astype(np.float64)
+
+    def particle_qd(self, body: int | SoftBodyHandle = 0) -> np.ndarray:
+        h = self._handle(body)
+        return self.state_in.particle_qd.numpy()[h.particle_start : h.particle_start + h.particle_count].astype(np.float64)
+
+    def _handle(self, body) -> SoftBodyHandle:
+        return body if isinstance(body, SoftBodyHandle) else self.soft_bodies[body]
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Everything needed to continue bit-identically: particle positions/velocities, collider poses."""
+        return {
+            "particle_q": self.state_in.particle_q.numpy().copy(),
+            "particle_qd": self.state_in.particle_qd.numpy().copy(),
+            "collider_q": self._collider_q.copy(),
+            "time": np.array(self.time),
+        }
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        for key in ("particle_q", "particle_qd", "collider_q"):
+            if key not in state:
+                raise KeyError(f"soft-body state is missing '{key}'")
+        if state["particle_q"].shape != (self.model.particle_count, 3):
+            raise ValueError(f"particle_q shape {state['particle_q'].shape} != ({self.model.particle_count}, 3)")
+        for s in (self.state_in, self.state_out):
+            s.particle_q.assign(state["particle_q"].astype(np.float32))
+            s.particle_qd.assign(state["particle_qd"].astype(np.float32))
+        self._collider_q = state["collider_q"].astype(np.float32).copy()
+        self._pending_q = self._collider_q
+        self.time = float(state.get("time", 0.0))
+        # VBD keeps per-step scratch (previous positions, contact warm starts) that is rebuilt
+        # from state_in at every step, so positions + velocities are the full state.
+
+    def set_soft_body_pose(self, body: int | SoftBodyHandle, pose: np.ndarray, vertices: np.ndarray | None = None):
+        """Place a soft body (rest shape, or ``vertices`` in its local frame) at ``pose``, at rest."""
+        h = self._handle(body)
+        v = h.rest_vertices if vertices is None else np.asarray(vertices, np.float64)
+        from .transforms import pose_wxyz_to_matrix
+
+        m = pose_wxyz_to_matrix(np.asarray(pose, np.float64))
+        world = v @ m[:3, :3].T + m[:3, 3]
+        q = self.state_in.particle_q.numpy()
+        qd = self.state_in.particle_qd.numpy()
+        q[h.particle_start : h.particle_start + h.particle_count] = world
+        qd[h.particle_start : h.particle_start + h.particle_count] = 0.0
+        for s in (self.state_in, self.state_out):
+            s.particle_q.assign(q)
+            s.particle_qd.assign(qd)
+
+    # ------------------------------------------------------------------ OOD rescaling
+    def scale_materials(self, youngs_modulus: float = 1.0, mass: float = 1.0) -> None:
+        """Rescale Young's modulus and mass of every soft body in place, relative to nominal.
+
+        Both Lame parameters scale linearly with E (Poisson ratio unchanged); node masses and
+        inverse masses scale together. No kernel is rebuilt and the captured graph stays valid
+        because the arrays are updated in place.
+        """
+        if not (youngs_modulus > 0 and mass > 0):
+            raise ValueError(f"scales must be positive, got E x{youngs_modulus}, mass x{mass}")
+        mat = self._nominal_tet_materials.copy()
+        mat[:, 0:2] *= youngs_modulus  # columns: k_mu, k_lambda, k_damp
+        self.model.tet_materials.assign(mat)
+        pm = self._nominal_particle_mass * mass
+        self.model.particle_mass.assign(pm)
+        inv = np.where(pm > 0, 1.0 / np.where(pm > 0, pm, 1.0), 0.0).astype(np.float32)
+        self.model.particle_inv_mass.assign(inv)
+        self.material_scale = {"youngs_modulus": float(youngs_modulus), "mass": float(mass)}
+
+    # ------------------------------------------------------------------ health
+    def check_health(self, max_speed: float = C.MAX_PARTICLE_SPEED) -> None:
+        """Raise :class:`SimulationInstabilityError` with the reason if the FEM state is invalid."""
+        q = self.state_in.particle_q.numpy()
+        qd = self.state_in.particle_qd.numpy()
+        if not np.all(np.isfinite(q)) or not np.all(np.isfinite(qd)):
+            raise SimulationInstabilityError(
+                f"FEM state contains NaN/inf at t={self.time:.4f} s; reduce the time step or contact stiffness"
+            )
+        speed = float(np.linalg.norm(qd, axis=1).max())
+        if speed > max_speed:
+            raise SimulationInstabilityError(
+                f"FEM node speed {speed:.2f} m/s exceeds {max_speed} m/s at t={self.time:.4f} s (exploding simulation)"
+            )
+        for h in self.soft_bodies:
+            v = q[h.particle_start : h.particle_start + h.particle_count]
+            vol = tet_volumes(v, h.tets)
+            rest = tet_volumes(h.rest_vertices, h.tets)
+            bad = vol <= C.MIN_TET_VOLUME_RATIO * rest
+            if bad.any():
+                raise SimulationInstabilityError(
+                    f"{int(bad.sum())} of {len(vol)} tets of '{h.name}' inverted or collapsed "
+                    f"(volume <= {C.MIN_TET_VOLUME_RATIO} x rest) at t={self.time:.4f} s"
+                )
+
+
+def _angular_velocity_xyzw(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
+    """World-frame angular velocity taking unit quaternions q0 -> q1 (xyzw, batched) in dt."""
+    x0, y0, z0, w0 = (q0[:, i] for i in range(4))
+    x1, y1, z1, w1 = (q1[:, i] for i in range(4))
+    # dq = q1 * conj(q0)
+    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
+    y = -w1 * y0 + y1 * w0 - z1 * x0 + x1 * z0
+    z = -w1 * z0 + z1 * w0 - x1 * y0 + y1 * x0
+    sign = np.where(w < 0, -1.0, 1.0)  # shortest arc
+    v = np.stack([x, y, z], axis=1) * sign[:, None]
+    s = np.linalg.norm(v, axis=1)
+    angle = 2.0 * np.arctan2(s, np.abs(w))
+    axis = np.where(s[:, None] > 1e-12, v / np.maximum(s, 1e-12)[:, None], 0.0)
+    return (axis * (angle / dt)[:, None]).astype(np.float32)
