@@ -37,3 +37,9 @@ MAX_PARTICLE_SPEED = 5.0  # m/s: nothing in a tabletop pick-and-place moves this
 MIN_TET_VOLUME_RATIO = 0.02  # a tet squashed below 2 % of its rest volume counts as collapsed
 
 IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])  # SAPIEN order [p, q_wxyz]
+
+# Friction coefficients of the colliders (VBD mixes them with the object's own).
+FINGER_FRICTION = 1.2  # rubber pads (the paper uses dynamic mu = 1.2 on the fingers)
+TABLE_FRICTION = 0.6
+# Objects spawn this far above their support (plus the node contact radius) and settle down.
+SPAWN_CLEARANCE = 0.5e-3

@@ -1,0 +1,333 @@
+"""Base class of every SoftVT environment: ManiSkill scene + Newton FEM soft bodies in lockstep.
+
+Subclasses declare their soft objects (:meth:`SoftBodyEnv._soft_object_specs`), load the rest
+of the scene (:meth:`SoftBodyEnv._load_props`) and place things per episode
+(:meth:`SoftBodyEnv._initialize_task`). This class owns what every task shares:
+
+- the Panda (``panda_softvt``: force-limited gripper, absolute end-effector pose control);
+- the Newton world with one tetrahedral body per soft object, and colliders mirrored from
+  SAPIEN (finger pads, hand, table top, any prop that declares a collider);
+- lockstep stepping (SAPIEN and Newton at ``SIM_FREQ``) with contact wrenches fed back to the
+  finger links;
+- a settle routine before each episode; the settled nodes are x_0 of the deformation metric;
+- drawing the deformed surface in SAPIEN after every control step (cameras see the squeeze);
+- env state save/restore including FEM node positions and velocities;
+- OOD rescaling of Young's modulus and mass at reset (``options={"youngs_modulus_scale": s,
+  "mass_scale": s}``), without rebuilding kernels;
+- instability detection (NaN, inverted tets, exploding velocities) after every control step.
+
+Evaluator-only state (FEM nodes, object poses, deformation, material parameters) is exposed
+through :meth:`SoftBodyEnv.evaluator_state` and never through observations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.utils.structs.types import SimConfig
+
+from ..assets.tetmesh import surface_of_tets
+from ..physics import constants as PC
+from ..physics.coupling import MirroredBody, SapienNewtonCoupling
+from ..physics.deformation import deformation
+from ..physics.fem import SoftBodyWorld, SoftMaterial
+from . import constants as C
+from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
+
+
+@dataclass
+class SoftObjectSpec:
+    """A soft object of a scene: rest tet mesh in its local frame, material, display colour."""
+
+    name: str
+    vertices: np.ndarray  # (N, 3) m, local frame, bottom at z = 0
+    tets: np.ndarray  # (M, 4)
+    material: SoftMaterial
+    color: tuple = (0.9, 0.85, 0.7, 1.0)
+
+
+@dataclass
+class PropCollider:
+    """A SAPIEN body that soft objects can touch: boxes or convex parts in the body's frame."""
+
+    name: str
+    component: sapien.physx.PhysxRigidBaseComponent
+    boxes: list | None = None  # [(half_extents, local_pose7), ...]
+    convex_parts: list | None = None  # [(vertices, faces), ...] in the body frame
+    friction: float = 0.8
+
+
+class SoftBodyEnv(BaseEnv):
+    """ManiSkill env with Newton FEM soft bodies. CPU simulation, one env per process."""
+
+    SUPPORTED_ROBOTS = ["panda_softvt"]
+    agent: PandaSoftVT
+
+    def __init__(self, *args, robot_uids="panda_softvt", **kwargs):
+        if kwargs.get("num_envs", 1) != 1:
+            raise ValueError(
+                "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
+                "are single-threaded); use a process pool for parallel episodes"
+            )
+        kwargs.setdefault("sim_backend", "physx_cpu")
+        kwargs.setdefault("render_backend", "cpu")
+        if kwargs["sim_backend"] not in ("physx_cpu", "cpu"):
+            raise ValueError(f"SoftVT envs need sim_backend='physx_cpu' (got {kwargs['sim_backend']!r})")
+        self._world: SoftBodyWorld | None = None
+        self._coupling: SapienNewtonCoupling | None = None
+        self._render_entities: dict[str, sapien.Entity] = {}
+        self._x0: dict[str, np.ndarray] = {}
+        self.settle_info: dict = {}
+        super().__init__(*args, robot_uids=robot_uids, **kwargs)
+
+    # ------------------------------------------------------------------ config
+    @property
+    def _default_sim_config(self):
+        # Lockstep rate: SAPIEN and Newton both at SIM_FREQ (SPEC section 3).
+        return SimConfig(sim_freq=C.SIM_FREQ, control_freq=C.CONTROL_FREQ)
+
+    def _load_agent(self, options: dict):
+        super()._load_agent(options, sapien.Pose(p=C.ROBOT_BASE_POSE[:3], q=C.ROBOT_BASE_POSE[3:]))
+
+    # ------------------------------------------------------------------ subclass hooks
+    def _soft_object_specs(self) -> list[SoftObjectSpec]:
+        raise NotImplementedError
+
+    def _load_props(self, options: dict) -> list[PropCollider]:
+        """Load task props (containers, distractors); return those soft objects can touch."""
+        return []
+
+    def _initialize_task(self, env_idx: torch.Tensor, options: dict) -> dict[str, np.ndarray]:
+        """Place robot and props; return each soft object's rest pose [p, q_wxyz] (bottom at p)."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ scene
+    def _load_scene(self, options: dict):
+        b = self.scene.create_actor_builder()
+        he = C.TABLE_HALF_EXTENTS
+        pose = sapien.Pose(p=[0.0, 0.0, -he[2]])
+        b.add_box_collision(half_size=he, pose=pose)
+        b.add_box_visual(half_size=he, pose=pose, material=sapien.render.RenderMaterial(base_color=[0.55, 0.42, 0.3, 1]))
+        b.initial_pose = sapien.Pose()
+        self.table = b.build_kinematic(name="table")
+        self._specs = {s.name: s for s in self._soft_object_specs()}
+        self._props = self._load_props(options)
+        sub_scene = self.scene.sub_scenes[0]
+        for spec in self._specs.values():
+            entity = sapien.Entity()
+            entity.set_name(f"soft/{spec.name}")
+            sub_scene.add_entity(entity)
+            self._render_entities[spec.name] = entity
+        self._surface = {n: surface_of_tets(s.tets) for n, s in self._specs.items()}
+
+    def _after_reconfigure(self, options):
+        super()._after_reconfigure(options)
+        self._build_soft_world()
+
+    def _build_soft_world(self):
+        world = SoftBodyWorld()
+        for spec in self._specs.values():
+            world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
+        bodies = []
+        robot_links = {link.name: link._objs[0] for link in self.agent.robot.get_links()}
+        for side in ("left", "right"):
+            name = f"panda_{side}finger"
+            world.add_collider_box(
+                name,
+                C.FINGERTIP_HALF_EXTENTS,
+                local_pose=np.array([*C.FINGERTIP_OFFSET[side], 1.0, 0.0, 0.0, 0.0]),
+                friction=PC.FINGER_FRICTION,
+            )
+            bodies.append(MirroredBody(name, robot_links[name], feedback=True))
+        world.add_collider_convex("panda_hand", [_hand_collision_hull()], friction=PC.FINGER_FRICTION)
+        bodies.append(MirroredBody("panda_hand", robot_links["panda_hand"], feedback=True))
+        he = C.TABLE_HALF_EXTENTS
+        world.add_collider_box("table", he, local_pose=np.array([0, 0, -he[2], 1, 0, 0, 0]), friction=PC.TABLE_FRICTION)
+        bodies.append(MirroredBody("table", self.table._bodies[0], feedback=False))
+        for prop in self._props:
+            if prop.boxes:
+                world.add_collider_boxes(prop.name, prop.boxes, friction=prop.friction)
+            else:
+                world.add_collider_convex(prop.name, prop.convex_parts, friction=prop.friction)
+            bodies.append(MirroredBody(prop.name, prop.component, feedback=False))
+        world.finalize()
+        self._world = world
+        self._coupling = SapienNewtonCoupling(world, bodies)
+
+    # ------------------------------------------------------------------ episode
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        with torch.device(self.device):
+            poses = self._initialize_task(env_idx, options)
+        missing = set(self._specs) - set(poses)
+        if missing:
+            raise RuntimeError(f"_initialize_task did not place soft objects {sorted(missing)}")
+        e_scale = float(options.get("youngs_modulus_scale", 1.0))
+        m_scale = float(options.get("mass_scale", 1.0))
+        self._world.scale_materials(youngs_modulus=e_scale, mass=m_scale)
+        for i, name in enumerate(self._specs):
+            # Spawn a hair above the support so the object settles onto it instead of starting in contact.
+            p = np.asarray(poses[name], dtype=np.float64).copy()
+            p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
+            self._world.set_soft_body_pose(i, p)
+        self._coupling.teleport()
+        self.settle()
+        self._update_render_meshes()
+
+    def settle(self, speed: float = C.SETTLE_SPEED, max_time: float = C.SETTLE_MAX_TIME) -> dict:
+        """Let the soft objects come to rest on their supports (Newton only, robot frozen).
+
+        The settled node positions become x_0 for the deformation metric, so the expert and the
+        evaluator both start from the settled state (paper appendix, Assets).
+        """
+        world = self._world
+        ticks, max_ticks = 0, int(max_time * C.SIM_FREQ)
+        min_ticks = C.SIM_FREQ // 10
+        while True:
+            world.step()
+            ticks += 1
+            v = max(float(np.abs(world.particle_qd(i)).max()) for i in range(len(self._specs)))
+            if ticks >= min_ticks and v < speed:
+                break
+            if ticks >= max_ticks:
+                break
+        world.check_health()
+        self._x0 = {name: world.particle_q(i) for i, name in enumerate(self._specs)}
+        self._coupling.wrenches[:] = 0.0
+        world.time = 0.0
+        self.settle_info = {"ticks": ticks, "max_node_speed": v, "settled": v < speed}
+        return self.settle_info
+
+    # ------------------------------------------------------------------ stepping
+    def _before_simulation_step(self):
+        self._coupling.before_sapien_step()
+
+    def _after_simulation_step(self):
+        self._coupling.after_sapien_step()
+
+    def _after_control_step(self):
+        self._world.check_health()
+        self._update_render_meshes()
+
+    def _update_render_meshes(self):
+        for i, (name, entity) in enumerate(self._render_entities.items()):
+            spec = self._specs[name]
+            nodes = self._world.particle_q(i).astype(np.float32)
+            faces = self._surface[name]
+            shape = sapien.render.RenderShapeTriangleMesh(
+                vertices=nodes,
+                triangles=faces.astype(np.uint32),
+                normals=_vertex_normals(nodes, faces),
+                uvs=np.zeros((len(nodes), 2), np.float32),
+                material=sapien.render.RenderMaterial(base_color=list(spec.color), roughness=0.8),
+            )
+            body = sapien.render.RenderBodyComponent()
+            body.attach(shape)
+            for old in [c for c in entity.components if isinstance(c, sapien.render.RenderBodyComponent)]:
+                entity.remove_component(old)
+            entity.add_component(body)
+
+    # ------------------------------------------------------------------ state
+    def get_state_dict(self):
+        state = super().get_state_dict()
+        state["soft"] = torch.from_numpy(self._soft_state_vector()[None])
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
+        super().set_state_dict(state, env_idx)
+        if "soft" in state:
+            self._set_soft_state_vector(np.asarray(common_to_numpy(state["soft"]))[0])
+
+    def set_state(self, state, env_idx: torch.Tensor = None):
+        # ManiSkill rebuilds only actors and articulations from a flat vector: the soft-body
+        # state is the tail that get_state() appended.
+        state = common_to_numpy(state)
+        state = state[None] if state.ndim == 1 else state
+        n_soft = self._soft_state_vector().size
+        super().set_state(torch.from_numpy(state[:, :-n_soft]), env_idx)
+        self._set_soft_state_vector(state[0, -n_soft:])
+
+    def _soft_state_vector(self) -> np.ndarray:
+        s = self._world.get_state()
+        return np.concatenate(
+            [s["particle_q"].ravel(), s["particle_qd"].ravel(), s["collider_q"].ravel(), self._coupling.wrenches.ravel()]
+        ).astype(np.float64)
+
+    def _set_soft_state_vector(self, vec: np.ndarray):
+        w = self._world
+        n_p, n_b, n_c = w.model.particle_count, w.model.body_count, len(w.colliders)
+        sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6]
+        if vec.size != sum(sizes):
+            raise ValueError(f"soft-body state has {vec.size} values, this scene needs {sum(sizes)}")
+        q, qd, cq, wr = np.split(vec, np.cumsum(sizes)[:-1])
+        w.set_state({"particle_q": q.reshape(-1, 3), "particle_qd": qd.reshape(-1, 3), "collider_q": cq.reshape(-1, 7)})
+        self._coupling.wrenches = wr.reshape(n_c, 6).copy()
+        self._update_render_meshes()
+
+    # ------------------------------------------------------------------ evaluator-only
+    def soft_nodes(self, name: str | None = None) -> np.ndarray:
+        """Current FEM node positions (world frame). Evaluator-only."""
+        name = name or next(iter(self._specs))
+        return self._world.particle_q(list(self._specs).index(name))
+
+    def deformation(self, name: str | None = None) -> float:
+        """D_t of a soft object against its settled nodes x_0. Evaluator-only."""
+        name = name or next(iter(self._specs))
+        return deformation(self.soft_nodes(name), self._x0[name])
+
+    def evaluator_state(self) -> dict:
+        """Everything the evaluator may read and a policy must not: nodes, poses, D_t, materials."""
+        out = {}
+        for i, name in enumerate(self._specs):
+            nodes = self._world.particle_q(i)
+            spec = self._specs[name]
+            out[name] = {
+                "nodes": nodes,
+                "x0": self._x0[name],
+                "centroid": nodes.mean(axis=0),
+                "deformation": deformation(nodes, self._x0[name]),
+                "youngs_modulus": spec.material.youngs_modulus * self._world.material_scale["youngs_modulus"],
+                "mass": float(self._world.model.particle_mass.numpy()[
+                    self._world.soft_bodies[i].particle_start : self._world.soft_bodies[i].particle_start
+                    + self._world.soft_bodies[i].particle_count
+                ].sum()),
+            }
+        out["pad_wrenches"] = {b.name: self._coupling.wrench(b.name).copy() for b in self._coupling.bodies if b.feedback}
+        return out
+
+    @property
+    def gripper_width(self) -> float:
+        """Jaw gap between the two fingertip pads (m)."""
+        q = self.agent.robot.get_qpos()[0, -2:].cpu().numpy()
+        return float(q.sum())
+
+
+def common_to_numpy(x) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+
+def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)).astype(np.float32)
+
+
+_HAND_HULL = None
+
+
+def _hand_collision_hull():
+    """Convex hull of the Panda hand's collision mesh (from the ManiSkill wheel), hand frame."""
+    global _HAND_HULL
+    if _HAND_HULL is None:
+        import trimesh
+        from mani_skill import PACKAGE_ASSET_DIR
+
+        m = trimesh.load(f"{PACKAGE_ASSET_DIR}/robots/panda/franka_description/meshes/collision/hand.stl", force="mesh")
+        hull = m.convex_hull
+        _HAND_HULL = (np.asarray(hull.vertices), np.asarray(hull.faces))
+    return _HAND_HULL
