@@ -25,3 +25,5 @@ MAX_EPISODE_STEPS = 300
 # Settling before an episode: the object is at rest when its fastest node is slower than this.
 SETTLE_SPEED = 2e-3  # m/s
 SETTLE_MAX_TIME = 1.0  # s
+
+CAMERA_SIZE = 224  # policy camera resolution (SPEC section 4)

@@ -28,6 +28,8 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
 from mani_skill.utils.structs.types import SimConfig
 
 from ..assets.tetmesh import surface_of_tets
@@ -89,6 +91,17 @@ class SoftBodyEnv(BaseEnv):
     def _default_sim_config(self):
         # Lockstep rate: SAPIEN and Newton both at SIM_FREQ (SPEC section 3).
         return SimConfig(sim_freq=C.SIM_FREQ, control_freq=C.CONTROL_FREQ)
+
+    @property
+    def _default_sensor_configs(self):
+        # Third-person view of the workspace at the policy resolution.
+        pose = sapien_utils.look_at(eye=[0.35, 0.0, 0.45], target=[-0.1, 0.0, 0.05])
+        return [CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, np.pi / 2, 0.01, 100)]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        pose = sapien_utils.look_at(eye=[0.28, 0.28, 0.25], target=[0.0, 0.0, 0.06])
+        return CameraConfig("render_camera", pose, 384, 288, 1.0, 0.01, 100)
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose(p=C.ROBOT_BASE_POSE[:3], q=C.ROBOT_BASE_POSE[3:]))
