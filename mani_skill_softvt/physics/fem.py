@@ -307,9 +307,6 @@ class SoftBodyWorld:
             iterations=self.iterations,
             friction_epsilon=C.FRICTION_EPSILON,
             integrate_with_external_rigid_solver=True,
-            # Fixed contact penalty (no AVBD ramp): the reported contact wrench is then the
-            # force the particles actually felt.
-            rigid_avbd_linear_beta=0.0,
             particle_enable_tile_solve=False,  # measured faster on CPU for ~300-node bodies
         )
         self.state_in = m.state()
