@@ -17,15 +17,6 @@ from pathlib import Path
 import numpy as np
 
 
-def closure_to_q(closure: float) -> float:
-    """Closure in [0, 1] (0 open, 1 fully closed) -> finger joint target q."""
-    from .tasks import constants as C
-
-    if not 0.0 <= closure <= 1.0:
-        raise ValueError(f"closure must lie in [0, 1], got {closure}")
-    return C.GRIPPER_Q_OPEN + closure * (C.GRIPPER_Q_CLOSED - C.GRIPPER_Q_OPEN)
-
-
 def _atomic_write(path: Path, write) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
@@ -52,7 +43,9 @@ def main(argv=None) -> dict:
     t0 = time.time()
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", render_mode="rgb_array")
     env.reset(seed=args.seed)
-    plan = GraspPlan(gripper_target=closure_to_q(args.closure))
+    if not 0.0 <= args.closure <= 1.0:
+        ap.error(f"--closure must lie in [0, 1], got {args.closure}")
+    plan = GraspPlan(closure=args.closure)
     frames, phase_end = [], {}
     bar = tqdm(total=sum(plan.steps.values()), desc="grasp-lift-hold-place", unit="step")
 

@@ -24,7 +24,7 @@ def main() -> None:
     env.reset(seed=0)
     xy = env.unwrapped.soft_nodes().mean(axis=0)[:2]
     for _ in range(2):
-        env.step(ee_action(np.array([*xy, 0.1]), C.GRIPPER_Q_OPEN))
+        env.step(ee_action(np.array([*xy, 0.1]), 0.0))
     env.close()
     print(f"[warmup] Warp kernels compiled and cached in {time.time() - t0:.1f} s")
 

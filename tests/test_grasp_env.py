@@ -70,7 +70,7 @@ def test_env_state_restore_replays_bit_for_bit(env):
     env.reset(seed=3)
     u = env.unwrapped
     xy = u.soft_nodes().mean(axis=0)[:2]
-    act = ee_action(np.array([*xy, 0.06]), C.GRIPPER_Q_OPEN)
+    act = ee_action(np.array([*xy, 0.06]), 0.0)
     for _ in range(3):
         env.step(act)
     state = u.get_state_dict()
@@ -112,3 +112,30 @@ def test_observations_carry_no_evaluator_state(env):
     # Neither the centroid nor any node coordinate of the object appears in the state vector.
     for value in np.concatenate([nodes.mean(axis=0), nodes[:5].ravel()]):
         assert not np.any(np.isclose(flat, value, atol=1e-7, rtol=0))
+
+
+def test_invalid_actions_raise_and_leave_the_state_untouched(env):
+    env.reset(seed=4)
+    u = env.unwrapped
+    before = u.get_state().clone()
+    for bad in (np.zeros(6, np.float32), np.full(7, np.nan, np.float32), np.array([0, 0, 0.1, np.pi, 0, 0, np.inf], np.float32)):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+    assert u.elapsed_steps.item() == 0
+    assert np.array_equal(u.get_state().numpy(), before.numpy())
+
+
+def test_closure_and_binary_gripper_encodings():
+    from mani_skill_softvt.tasks.robot import closure_to_q, q_to_closure
+
+    assert closure_to_q(0.0) == C.GRIPPER_Q_OPEN and closure_to_q(1.0) == C.GRIPPER_Q_CLOSED
+    assert q_to_closure(closure_to_q(0.37)) == pytest.approx(0.37)
+    for mode, g, expected in (("pd_ee_pose", 0.3, closure_to_q(0.3)), ("pd_ee_pose_binary", 0.7, C.GRIPPER_Q_CLOSED),
+                              ("pd_ee_pose_binary", 0.2, C.GRIPPER_Q_OPEN)):
+        e = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode=mode)
+        e.reset(seed=0)
+        assert e.action_space.shape == (7,)
+        e.unwrapped.agent.controller.controllers["gripper"].set_action(np.array([[g]], np.float32))
+        target = e.unwrapped.agent.controller.controllers["gripper"]._target_qpos[0].numpy()
+        assert target == pytest.approx([expected, expected], abs=1e-7)
+        e.close()

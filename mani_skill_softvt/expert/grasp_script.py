@@ -24,7 +24,7 @@ class GraspPlan:
     grasp_height: float = 0.025
     approach_height: float = 0.12
     lift_height: float = 0.125
-    gripper_target: float = C.GRIPPER_Q_CLOSED  # finger joint target q while grasping
+    closure: float = 1.0  # gripper closure while grasping (1 = close until the force limit)
     yaw: float = 0.0
     steps: dict = field(default_factory=lambda: {
         "approach": 20, "descend": 20, "close": 20, "lift": 30, "hold": 40, "lower": 30, "open": 10, "retreat": 15,
@@ -34,20 +34,20 @@ class GraspPlan:
         lo = np.array([*xy, self.grasp_height])
         hi = np.array([*xy, self.approach_height])
         up = np.array([*xy, self.lift_height])
-        g_open, g_closed = C.GRIPPER_Q_OPEN, self.gripper_target
+        g_open, g_closed = 0.0, self.closure
         return [
             ("approach", hi, g_open), ("descend", lo, g_open), ("close", lo, g_closed), ("lift", up, g_closed),
             ("hold", up, g_closed), ("lower", lo, g_closed), ("open", lo, g_open), ("retreat", hi, g_open),
         ]
 
 
-def ee_action(position_world: np.ndarray, gripper_q: float, yaw: float = 0.0) -> np.ndarray:
-    """pd_ee_pose action: position in the robot base frame, axis-angle, finger joint target."""
+def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> np.ndarray:
+    """pd_ee_pose action: position in the robot base frame, axis-angle, gripper closure."""
     # Rotating the down-pointing hand by yaw about world z; composed as axis-angle of Rz(yaw)*Rx(pi).
     c, s = np.cos(yaw / 2), np.sin(yaw / 2)
     # quaternion (w,x,y,z) of Rz(yaw) * Rx(pi) = (0, c, s, 0): rotation by pi about (c, s, 0)
     rotvec = np.pi * np.array([c, s, 0.0])
-    return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], rotvec, [gripper_q]]).astype(np.float32)
+    return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], rotvec, [closure]]).astype(np.float32)
 
 
 def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None) -> dict:

@@ -3,19 +3,62 @@
 Differences from ManiSkill's ``panda`` (same URDF and arm gains):
 - the gripper drive is force-limited (``GRIPPER_FORCE_LIMIT``), so a full "close" stops where
   the soft object pushes back instead of driving through it;
-- the default control mode is ``pd_ee_pose``: absolute end-effector position and axis-angle
-  orientation in the robot base frame (task-space differential IK), plus one gripper value.
+- the 7-D action of SPEC section 4: absolute end-effector position and axis-angle orientation
+  in the robot base frame (task-space differential IK), then one gripper value, in one of two
+  encodings (control modes):
+
+  ===================  =========================================================
+  ``pd_ee_pose``        gripper closure target g in [0, 1] (0 open 80 mm, 1 fully closed)
+  ``pd_ee_pose_binary`` gripper command in {0, 1}: < 0.5 open, >= 0.5 close
+  ===================  =========================================================
+
+  The closure maps linearly to the finger joint target q (half the jaw gap):
+  q = (1 - g) * GRIPPER_Q_OPEN + g * GRIPPER_Q_CLOSED.
 """
 
 from __future__ import annotations
 
 from copy import deepcopy
+from dataclasses import dataclass
 
-from mani_skill.agents.controllers import PDJointPosMimicControllerConfig
+import numpy as np
+import torch
+from gymnasium import spaces
+from mani_skill.agents.controllers import PDJointPosMimicController, PDJointPosMimicControllerConfig
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.panda.panda import Panda
 
 from . import constants as C
+
+
+def closure_to_q(closure):
+    """Gripper closure g in [0, 1] -> finger joint target q (m). Works on floats and tensors."""
+    return C.GRIPPER_Q_OPEN * (1 - closure) + C.GRIPPER_Q_CLOSED * closure  # exact at both ends
+
+
+def q_to_closure(q):
+    return (q - C.GRIPPER_Q_OPEN) / (C.GRIPPER_Q_CLOSED - C.GRIPPER_Q_OPEN)
+
+
+class ClosureGripperController(PDJointPosMimicController):
+    """Mimic finger controller commanded by a closure g in [0, 1] (or a binary open/close)."""
+
+    config: "ClosureGripperControllerConfig"
+
+    def _initialize_action_space(self):
+        self.single_action_space = spaces.Box(np.zeros(1, np.float32), np.ones(1, np.float32), dtype=np.float32)
+
+    def set_action(self, action):
+        g = torch.as_tensor(action, dtype=torch.float32, device=self.device)
+        g = (g >= 0.5).float() if self.config.binary else g.clamp(0.0, 1.0)
+        # The parent's action is the finger target q itself (normalize_action=False).
+        super().set_action(closure_to_q(g))
+
+
+@dataclass
+class ClosureGripperControllerConfig(PDJointPosMimicControllerConfig):
+    controller_cls = ClosureGripperController
+    binary: bool = False
 
 
 @register_agent(override=True)
@@ -27,17 +70,18 @@ class PandaSoftVT(Panda):
 
     @property
     def _controller_configs(self):
-        configs = deepcopy(super()._controller_configs)
-        gripper = PDJointPosMimicControllerConfig(
-            self.gripper_joint_names,
-            lower=C.GRIPPER_Q_CLOSED,
-            upper=C.GRIPPER_Q_OPEN,
-            stiffness=self.gripper_stiffness,
-            damping=self.gripper_damping,
-            force_limit=self.gripper_force_limit,
-            normalize_action=False,  # the action is the finger joint target q (half the jaw gap)
-            mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
-        )
-        for mode in configs.values():
-            mode["gripper"] = gripper
-        return configs
+        arm = deepcopy(super()._controller_configs["pd_ee_pose"]["arm"])
+        grippers = {}
+        for mode, binary in (("pd_ee_pose", False), ("pd_ee_pose_binary", True)):
+            grippers[mode] = ClosureGripperControllerConfig(
+                self.gripper_joint_names,
+                lower=C.GRIPPER_Q_CLOSED,
+                upper=C.GRIPPER_Q_OPEN,
+                stiffness=self.gripper_stiffness,
+                damping=self.gripper_damping,
+                force_limit=self.gripper_force_limit,
+                normalize_action=False,
+                mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
+                binary=binary,
+            )
+        return {mode: dict(arm=deepcopy(arm), gripper=g) for mode, g in grippers.items()}

@@ -215,6 +215,24 @@ class SoftBodyEnv(BaseEnv):
         return self.settle_info
 
     # ------------------------------------------------------------------ stepping
+    def step(self, action):
+        self._validate_action(action)
+        return super().step(action)
+
+    def _validate_action(self, action) -> None:
+        """Reject malformed actions before anything in the simulation changes."""
+        if action is None or isinstance(action, dict):
+            return
+        a = common_to_numpy(action)
+        shape = self.single_action_space.shape
+        if a.shape not in (shape, (1, *shape)):
+            raise ValueError(
+                f"action has shape {a.shape}, expected {shape} for control mode '{self.control_mode}' "
+                "([x, y, z] position, [rx, ry, rz] axis-angle, gripper)"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or inf: {a.ravel().tolist()}")
+
     def _before_simulation_step(self):
         self._coupling.before_sapien_step()
 
