@@ -1,0 +1,235 @@
+"""Generate every asset file under ``assets/`` (bit-identical on every run).
+
+    python -m mani_skill_softvt.assets.build            # all objects, twins and props
+    python -m mani_skill_softvt.assets.build --out /tmp/assets --only soft_stw_cube_hq
+
+Objects: surface mesh (OBJ), tetrahedral mesh at the default hex resolution (NPZ), visual parts
+(OBJ, one colour each) and a card (JSON); rigid twins get a card that reuses the soft files.
+Props: visual mesh, convex collision parts (coacd for the concave basket and plate) and a card.
+Every file is written to a temporary name and renamed, so an interrupted build never leaves a
+half-written file; a rerun rewrites identical bytes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..paths import ASSETS_DIR
+from .cards import ASSET_IDS, PROP_NAMES, read_obj
+from .materials import MATERIALS, PROP_FRICTION, RIGID_STIFFNESS_FACTOR
+from .shapes import object_parts
+from .tetmesh import tet_quality, tetrahedralize
+
+DEFAULT_RESOLUTION = 6  # the paper's hex resolution
+DESCRIPTIONS = {
+    "soft_pastry001": "white swirled pastry", "soft_pastry002": "panda-face pastry",
+    "soft_pastry003": "small chocolate rectangular pastry", "soft_stw_cube_hq": "soft cream-colored cube",
+    "soft_pastry005": "yellow square layered pastry", "soft_stw_cylinder_hq": "soft tan cylinder",
+    "soft_pastry011": "golden pastry", "soft_stw_cuboid_hq": "golden knotted pastry",
+    "soft_stw_sphere_hq": "soft red ball", "soft_pastry010": "orange pumpkin-shaped pastry",
+}
+
+
+def _atomic_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def obj_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """Plain OBJ, micrometre precision, fixed formatting (deterministic)."""
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.asarray(vertices, dtype=np.float64)]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces)]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def write_obj(path: Path, vertices, faces) -> None:
+    _atomic_bytes(path, obj_bytes(vertices, faces))
+
+
+def _npz_bytes(**arrays) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)  # zip entries carry a fixed 1980 timestamp: deterministic bytes
+    return buf.getvalue()
+
+
+def _json_bytes(d: dict) -> bytes:
+    return (json.dumps(d, indent=2, sort_keys=True) + "\n").encode()
+
+
+def _r(x, nd=9):
+    return [round(float(v), nd) for v in x] if np.ndim(x) else round(float(x), nd)
+
+
+def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION) -> dict:
+    import trimesh
+
+    d = out / "objects" / asset_id
+    body, decorations = object_parts(asset_id)
+    write_obj(d / "surface.obj", body.vertices, body.faces)
+    # Re-read what was written, so the tets conform to the file's (rounded) surface exactly.
+    sv, sf = read_obj(d / "surface.obj")
+    surface = trimesh.Trimesh(sv, sf, process=False)
+    tv, tt = tetrahedralize(surface, resolution)
+    _atomic_bytes(d / "tets.npz", _npz_bytes(vertices=tv, tets=tt.astype(np.int32)))
+    visual = [{"name": "body", "file": "surface.obj", "color": list(body.color)}]
+    for part in decorations:
+        write_obj(d / f"deco_{part.name}.obj", part.vertices, part.faces)
+        visual.append({"name": part.name, "file": f"deco_{part.name}.obj", "color": list(part.color)})
+    density, e, nu, damping, mu = MATERIALS[asset_id]
+    q = tet_quality(tv, tt)
+    volume = float(surface.volume)
+    card = {
+        "asset_id": asset_id, "twin_id": "rigid_" + asset_id[len("soft_"):], "kind": "soft",
+        "description": DESCRIPTIONS[asset_id], "dimensions": _r(surface.extents), "volume": _r(volume, 12),
+        "mass": _r(density * volume, 9), "density": density, "youngs_modulus": e, "poisson_ratio": nu,
+        "damping": damping, "friction": mu, "color": list(body.color), "resolution": resolution,
+        "files": {"surface": "surface.obj", "tets": "tets.npz", "visual": visual},
+        "counts": {"surface_vertices": len(sv), "surface_faces": len(sf), "tet_nodes": q["n_nodes"],
+                   "tets": q["n_tets"]},
+        "tet_quality": {"min_volume": _r(q["min_volume"], 15), "min_shape": _r(q["min_shape"], 6),
+                        "mean_shape": _r(q["mean_shape"], 6),
+                        "volume_error": _r(q["total_volume"] / volume - 1.0, 9)},
+    }
+    _atomic_bytes(d / "card.json", _json_bytes(card))
+    twin = dict(card)
+    twin_id = card["twin_id"]
+    twin.update(asset_id=twin_id, twin_id=asset_id, kind="rigid", youngs_modulus=e * RIGID_STIFFNESS_FACTOR)
+    twin["files"] = {"surface": f"../{asset_id}/surface.obj", "tets": f"../{asset_id}/tets.npz",
+                     "visual": [{**p, "file": f"../{asset_id}/{p['file']}"} for p in visual]}
+    _atomic_bytes(out / "objects" / twin_id / "card.json", _json_bytes(twin))
+    return card
+
+
+# ------------------------------------------------------------------------------------ props
+def _box(lo, hi):
+    import trimesh
+
+    m = trimesh.creation.box(bounds=np.array([lo, hi], dtype=np.float64))
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def _basket_shell(bottom=(0.14, 0.11), top=(0.17, 0.14), height=0.06, wall=0.006):
+    """Open-top tapered box with thick walls, one closed (watertight) surface."""
+    bx, by = bottom[0] / 2, bottom[1] / 2
+    tx, ty = top[0] / 2, top[1] / 2
+    ob = [(-bx, -by, 0), (bx, -by, 0), (bx, by, 0), (-bx, by, 0)]
+    ot = [(-tx, -ty, height), (tx, -ty, height), (tx, ty, height), (-tx, ty, height)]
+    it = [(-tx + wall, -ty + wall, height), (tx - wall, -ty + wall, height), (tx - wall, ty - wall, height),
+          (-tx + wall, ty - wall, height)]
+    ib = [(-bx + wall, -by + wall, wall), (bx - wall, -by + wall, wall), (bx - wall, by - wall, wall),
+          (-bx + wall, by - wall, wall)]
+    v = np.array(ob + ot + it + ib, dtype=np.float64)
+    f = [(0, 2, 1), (0, 3, 2)]  # outer bottom (down)
+    for i in range(4):
+        j = (i + 1) % 4
+        f += [(i, j, 4 + j), (i, 4 + j, 4 + i)]  # outer side
+        f += [(4 + i, 4 + j, 8 + j), (4 + i, 8 + j, 8 + i)]  # rim
+        f += [(8 + i, 8 + j, 12 + j), (8 + i, 12 + j, 12 + i)]  # inner side (faces inward)
+    f += [(12, 13, 14), (12, 14, 15)]  # inner floor (up)
+    return v, np.asarray(f, dtype=np.int32)
+
+
+def _plate_solid(radius=0.09, floor=0.006, rim_height=0.018, flat=0.065, sections=32):
+    import trimesh
+
+    profile = np.array([[0.0, 0.0], [flat + 0.01, 0.0], [radius, rim_height - 0.006], [radius, rim_height],
+                        [radius - 0.006, rim_height], [flat, floor], [0.0, floor]])
+    m = trimesh.creation.revolve(profile, sections=sections)
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def _convex_decomposition(v, f):
+    import coacd
+
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(coacd.Mesh(v, f), threshold=0.05, seed=0, max_convex_hull=16)
+    return sorted(((np.asarray(pv), np.asarray(pf)) for pv, pf in parts), key=lambda p: tuple(p[0].mean(axis=0).round(6)))
+
+
+def _cylinder(r, h, sections=24):
+    import trimesh
+
+    m = trimesh.creation.cylinder(radius=r, height=h, sections=sections)
+    v = np.asarray(m.vertices) + [0.0, 0.0, h / 2]
+    return v, np.asarray(m.faces)
+
+
+def _sphere(r):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=2, radius=r)
+    return np.asarray(m.vertices) + [0.0, 0.0, r], np.asarray(m.faces)
+
+
+def build_prop(name: str, out: Path) -> dict:
+    d = out / "props" / name
+    regions = {}
+    if name == "table":
+        v, f = _box((-0.6, -0.8, -0.05), (0.6, 0.8, 0.0))
+        parts, color = [(v, f)], (0.55, 0.42, 0.30, 1.0)
+        regions["top"] = ((-0.6, -0.8, 0.0), (0.6, 0.8, 0.0))
+    elif name == "basket":
+        v, f = _basket_shell()
+        parts, color = _convex_decomposition(v, f), (0.62, 0.45, 0.25, 1.0)
+        regions["interior"] = ((-0.064, -0.049, 0.006), (0.064, 0.049, 0.06))
+    elif name == "plate":
+        v, f = _plate_solid()
+        parts, color = _convex_decomposition(v, f), (0.92, 0.92, 0.95, 1.0)
+        regions["top"] = ((-0.065, -0.065, 0.006), (0.065, 0.065, 0.05))
+    elif name == "tea_tin":
+        v, f = _box((-0.03, -0.03, 0.0), (0.03, 0.03, 0.09))
+        parts, color = [(v, f)], (0.15, 0.35, 0.65, 1.0)
+    elif name == "mug":
+        v, f = _cylinder(0.04, 0.09)
+        parts, color = [(v, f)], (0.95, 0.95, 0.92, 1.0)
+    elif name == "apple":
+        v, f = _sphere(0.035)
+        parts, color = [(v, f)], (0.55, 0.75, 0.2, 1.0)
+    else:
+        raise ValueError(f"unknown prop '{name}'")
+    write_obj(d / "visual.obj", v, f)
+    coll = []
+    for i, (pv, pf) in enumerate(parts):
+        write_obj(d / f"collision_{i:02d}.obj", pv, pf)
+        coll.append(f"collision_{i:02d}.obj")
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    card = {"name": name, "dimensions": _r(hi - lo), "friction": PROP_FRICTION.get(name, PROP_FRICTION["distractor"]),
+            "color": list(color), "files": {"visual": "visual.obj", "collision": coll},
+            "regions": {k: [_r(a), _r(b)] for k, (a, b) in regions.items()}}
+    _atomic_bytes(d / "card.json", _json_bytes(card))
+    return card
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.assets.build", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=ASSETS_DIR)
+    ap.add_argument("--only", nargs="*", help="asset ids or prop names to build (default: all)")
+    ap.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION)
+    args = ap.parse_args(argv)
+    from tqdm import tqdm
+
+    names = args.only or (ASSET_IDS + PROP_NAMES)
+    unknown = [n for n in names if n not in ASSET_IDS and n not in PROP_NAMES]
+    if unknown:
+        ap.error(f"unknown names {unknown}; objects: {ASSET_IDS}; props: {PROP_NAMES}")
+    for name in tqdm(names, desc="building assets"):
+        if name in ASSET_IDS:
+            c = build_object(name, args.out, args.resolution)
+            tqdm.write(f"{name:<22} {c['mass'] * 1e3:6.1f} g  {c['counts']['tet_nodes']:4d} nodes "
+                       f"{c['counts']['tets']:5d} tets  dims {[round(x * 1e3) for x in c['dimensions']]} mm")
+        else:
+            c = build_prop(name, args.out)
+            tqdm.write(f"{name:<22} {len(c['files']['collision'])} convex parts")
+
+
+if __name__ == "__main__":
+    main()

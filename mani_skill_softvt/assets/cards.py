@@ -1,0 +1,170 @@
+"""Asset cards: one JSON file per object and per prop, validated on load.
+
+Objects live in ``assets/objects/<asset_id>/card.json``; rigid twins have their own card that
+points at the soft asset's files. Props live in ``assets/props/<name>/card.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..paths import ASSETS_DIR
+
+ASSET_IDS = [
+    "soft_pastry001", "soft_pastry002", "soft_pastry003", "soft_stw_cube_hq", "soft_pastry005",
+    "soft_stw_cylinder_hq", "soft_pastry011", "soft_stw_cuboid_hq", "soft_stw_sphere_hq", "soft_pastry010",
+]
+TWIN_IDS = ["rigid_" + a[len("soft_"):] for a in ASSET_IDS]
+PROP_NAMES = ["table", "basket", "plate", "tea_tin", "mug", "apple"]
+
+_REBUILD = "rebuild the assets with: python -m mani_skill_softvt.assets.build"
+
+_OBJECT_FIELDS = {
+    "asset_id": str, "twin_id": str, "kind": str, "description": str, "dimensions": list, "volume": float,
+    "mass": float, "density": float, "youngs_modulus": float, "poisson_ratio": float, "damping": float,
+    "friction": float, "color": list, "resolution": int, "files": dict, "counts": dict,
+}
+
+
+def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of a plain OBJ file (as written by :func:`write_obj`)."""
+    v, f = [], []
+    with open(path) as fh:
+        for line in fh:
+            if line.startswith("v "):
+                v.append([float(x) for x in line.split()[1:4]])
+            elif line.startswith("f "):
+                f.append([int(x.split("/")[0]) - 1 for x in line.split()[1:4]])
+    if not v or not f:
+        raise ValueError(f"{path}: no vertices or faces; {_REBUILD}")
+    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int32)
+
+
+def _load_json(path: Path, what: str) -> dict:
+    if not path.is_file():
+        raise FileNotFoundError(f"{what} card not found: {path}; {_REBUILD}")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{what} card {path} is not valid JSON ({e}); {_REBUILD}") from e
+
+
+def _check_fields(data: dict, fields: dict, path: Path) -> None:
+    for key, typ in fields.items():
+        if key not in data:
+            raise ValueError(f"card {path} is missing field '{key}'; {_REBUILD}")
+        ok = isinstance(data[key], (int, float)) if typ is float else isinstance(data[key], typ)
+        if not ok or isinstance(data[key], bool):
+            raise ValueError(f"card {path}: field '{key}' should be {typ.__name__}, got {data[key]!r}")
+
+
+def _file(card_dir: Path, rel: str, card_path: Path) -> Path:
+    p = (card_dir / rel).resolve()
+    if not p.is_file():
+        raise FileNotFoundError(f"card {card_path} refers to a missing file {p}; {_REBUILD}")
+    return p
+
+
+@dataclass(frozen=True)
+class AssetCard:
+    asset_id: str
+    twin_id: str
+    kind: str  # "soft" or "rigid"
+    description: str  # the words instructions use for it
+    dimensions: tuple  # AABB extents (m)
+    volume: float  # m^3
+    mass: float  # kg = density * volume
+    density: float
+    youngs_modulus: float
+    poisson_ratio: float
+    damping: float
+    friction: float
+    color: tuple  # RGBA of the body
+    resolution: int
+    surface_file: Path
+    tet_file: Path
+    visual_parts: tuple  # ((name, path, rgba), ...): body first, then decorations
+    counts: dict
+
+    def surface_mesh(self):
+        import trimesh
+
+        v, f = read_obj(self.surface_file)
+        return trimesh.Trimesh(v, f, process=False)
+
+    def tet_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        with np.load(self.tet_file) as d:
+            return d["vertices"].astype(np.float64), d["tets"].astype(np.int32)
+
+    def material(self):
+        from ..physics.fem import SoftMaterial
+
+        return SoftMaterial(self.youngs_modulus, self.poisson_ratio, self.density, self.damping, self.friction)
+
+
+@lru_cache(maxsize=None)
+def load_card(asset_id: str, assets_dir: Path = ASSETS_DIR) -> AssetCard:
+    """Load and validate an object card (soft id or rigid twin id)."""
+    if asset_id not in ASSET_IDS and asset_id not in TWIN_IDS:
+        raise ValueError(f"unknown asset '{asset_id}'; known: {ASSET_IDS + TWIN_IDS}")
+    path = Path(assets_dir) / "objects" / asset_id / "card.json"
+    d = _load_json(path, f"asset '{asset_id}'")
+    _check_fields(d, _OBJECT_FIELDS, path)
+    if d["asset_id"] != asset_id:
+        raise ValueError(f"card {path} describes '{d['asset_id']}', expected '{asset_id}'")
+    if d["kind"] not in ("soft", "rigid"):
+        raise ValueError(f"card {path}: kind must be 'soft' or 'rigid', got {d['kind']!r}")
+    if not (d["youngs_modulus"] > 0 and d["density"] > 0 and 0 <= d["poisson_ratio"] < 0.5):
+        raise ValueError(f"card {path}: material values out of range (E > 0, density > 0, 0 <= nu < 0.5)")
+    files = d["files"]
+    for key in ("surface", "tets", "visual"):
+        if key not in files:
+            raise ValueError(f"card {path}: files.{key} missing; {_REBUILD}")
+    parts = tuple((p["name"], _file(path.parent, p["file"], path), tuple(p["color"])) for p in files["visual"])
+    return AssetCard(
+        asset_id=asset_id, twin_id=d["twin_id"], kind=d["kind"], description=d["description"],
+        dimensions=tuple(d["dimensions"]), volume=float(d["volume"]), mass=float(d["mass"]),
+        density=float(d["density"]), youngs_modulus=float(d["youngs_modulus"]),
+        poisson_ratio=float(d["poisson_ratio"]), damping=float(d["damping"]), friction=float(d["friction"]),
+        color=tuple(d["color"]), resolution=int(d["resolution"]),
+        surface_file=_file(path.parent, files["surface"], path), tet_file=_file(path.parent, files["tets"], path),
+        visual_parts=parts, counts=dict(d["counts"]),
+    )
+
+
+@dataclass(frozen=True)
+class PropCard:
+    name: str
+    dimensions: tuple
+    friction: float
+    visual_file: Path
+    color: tuple
+    collision_files: tuple  # convex parts (OBJ), prop frame
+    regions: dict  # name -> (lo xyz, hi xyz) axis-aligned boxes in the prop frame (e.g. "interior")
+
+    def visual_mesh(self):
+        return read_obj(self.visual_file)
+
+    def convex_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        return [read_obj(p) for p in self.collision_files]
+
+
+@lru_cache(maxsize=None)
+def load_prop(name: str, assets_dir: Path = ASSETS_DIR) -> PropCard:
+    if name not in PROP_NAMES:
+        raise ValueError(f"unknown prop '{name}'; known: {PROP_NAMES}")
+    path = Path(assets_dir) / "props" / name / "card.json"
+    d = _load_json(path, f"prop '{name}'")
+    _check_fields(d, {"name": str, "dimensions": list, "friction": float, "color": list, "files": dict,
+                      "regions": dict}, path)
+    return PropCard(
+        name=name, dimensions=tuple(d["dimensions"]), friction=float(d["friction"]),
+        visual_file=_file(path.parent, d["files"]["visual"], path), color=tuple(d["color"]),
+        collision_files=tuple(_file(path.parent, f, path) for f in d["files"]["collision"]),
+        regions={k: (tuple(v[0]), tuple(v[1])) for k, v in d["regions"].items()},
+    )

@@ -1,0 +1,101 @@
+"""Assets: watertight meshes, volumes, masses, tet quality, cards, twins, reproducible build."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import trimesh
+
+from mani_skill_softvt.assets import ASSET_IDS, PROP_NAMES, TWIN_IDS, load_card, load_prop
+from mani_skill_softvt.assets.build import build_object, build_prop
+from mani_skill_softvt.assets.cards import read_obj
+from mani_skill_softvt.assets.tetmesh import box_tetmesh, surface_of_tets, tet_quality, tet_signed_volumes
+from mani_skill_softvt.paths import ASSETS_DIR
+
+
+@pytest.mark.parametrize("asset_id", ASSET_IDS)
+def test_object_meshes_volumes_and_masses(asset_id):
+    card = load_card(asset_id)
+    surface = card.surface_mesh()
+    assert surface.is_watertight and surface.is_winding_consistent and surface.volume > 0
+    ext = np.asarray(card.dimensions)
+    # Graspable by the Panda: narrowest horizontal extent fits the 80 mm jaw with margin.
+    assert min(ext[0], ext[1]) < 0.065 and 0.02 < ext[2] < 0.07
+    assert surface.bounds[0][2] == pytest.approx(0.0, abs=1e-6)  # rests on z = 0
+    assert card.volume == pytest.approx(surface.volume, rel=1e-6)
+    assert card.mass == pytest.approx(card.density * surface.volume, rel=1e-6)
+    v, t = card.tet_mesh()
+    q = tet_quality(v, t)
+    vols = tet_signed_volumes(v, t)
+    assert vols.min() > 1e-4 * vols.mean()  # no inverted or degenerate tets
+    assert q["min_shape"] > 0.02
+    assert q["total_volume"] == pytest.approx(surface.volume, rel=0.02)
+    assert q["n_nodes"] == card.counts["tet_nodes"] and q["n_tets"] == card.counts["tets"]
+    # The tet boundary is a closed surface enclosing the same volume.
+    boundary = trimesh.Trimesh(v, surface_of_tets(t), process=False)
+    assert boundary.is_watertight and boundary.volume == pytest.approx(q["total_volume"], rel=1e-9)
+
+
+@pytest.mark.parametrize("soft_id,twin_id", zip(ASSET_IDS, TWIN_IDS))
+def test_twins_share_mesh_texture_and_mass(soft_id, twin_id):
+    soft, twin = load_card(soft_id), load_card(twin_id)
+    assert twin.kind == "rigid" and soft.kind == "soft" and soft.twin_id == twin_id and twin.twin_id == soft_id
+    assert twin.surface_file == soft.surface_file and twin.tet_file == soft.tet_file
+    assert [p[1:] for p in twin.visual_parts] == [p[1:] for p in soft.visual_parts]
+    assert twin.mass == soft.mass and twin.density == soft.density
+    assert twin.youngs_modulus >= 100 * soft.youngs_modulus
+
+
+@pytest.mark.parametrize("name", PROP_NAMES)
+def test_props_load_with_convex_colliders(name):
+    prop = load_prop(name)
+    for v, f in prop.convex_parts():
+        m = trimesh.Trimesh(v, f, process=False)
+        # coacd parts are convex: every vertex lies inside or on its own hull.
+        assert m.convex_hull.volume == pytest.approx(abs(m.volume), rel=0.02)
+    if name in ("basket", "plate"):
+        assert len(prop.collision_files) > 1  # concave: decomposed
+        region = prop.regions["interior" if name == "basket" else "top"]
+        assert np.all(np.asarray(region[1]) > np.asarray(region[0]))
+
+
+def test_missing_or_malformed_cards_give_clear_errors(tmp_path):
+    shutil.copytree(ASSETS_DIR / "objects" / "soft_stw_cube_hq", tmp_path / "objects" / "soft_stw_cube_hq")
+    with pytest.raises(FileNotFoundError, match="assets.build"):
+        load_card("soft_pastry001", tmp_path)
+    card = tmp_path / "objects" / "soft_stw_cube_hq" / "card.json"
+    d = json.loads(card.read_text())
+    del d["density"]
+    card.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="missing field 'density'"):
+        load_card("soft_stw_cube_hq", tmp_path)
+    card.write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        load_card("soft_stw_cube_hq", tmp_path)
+    with pytest.raises(ValueError, match="unknown asset"):
+        load_card("soft_croissant")
+
+
+def test_build_is_bit_identical(tmp_path):
+    build_object("soft_pastry002", tmp_path)
+    build_prop("basket", tmp_path)
+    for rel in ("objects/soft_pastry002", "objects/rigid_pastry002", "props/basket"):
+        for f in sorted((tmp_path / rel).iterdir()):
+            assert f.read_bytes() == (ASSETS_DIR / rel / f.name).read_bytes(), f"{rel}/{f.name} differs"
+
+
+def test_box_tetmesh_is_conforming_and_positive():
+    v, t = box_tetmesh((0.05, 0.03, 0.02), 6, min_cells=2)
+    assert tet_signed_volumes(v, t).min() > 0
+    assert tet_signed_volumes(v, t).sum() == pytest.approx(0.05 * 0.03 * 0.02, rel=1e-12)
+    m = trimesh.Trimesh(v, surface_of_tets(t), process=False)
+    assert m.is_watertight and m.volume == pytest.approx(0.05 * 0.03 * 0.02, rel=1e-12)
+    assert v[:, 2].min() == 0.0 and np.allclose(v[:, :2].mean(axis=0), 0.0)
+
+
+def test_read_obj_rejects_empty(tmp_path):
+    p = tmp_path / "empty.obj"
+    p.write_text("# nothing\n")
+    with pytest.raises(ValueError, match="no vertices"):
+        read_obj(p)
