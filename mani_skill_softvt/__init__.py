@@ -12,3 +12,5 @@ Layout (one concept, one place):
 """
 
 __version__ = "0.1.0"
+
+from . import tasks  # noqa: E402,F401  (registers the four suites and SoftGraspLift-v1)

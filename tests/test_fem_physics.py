@@ -14,15 +14,16 @@ from mani_skill_softvt.physics.fem import SimulationInstabilityError, SoftBodyWo
 L = 0.05  # cube edge (m)
 G = 9.81
 TICKS_PER_S = PC.SIM_FREQ
+PLATE_CONTACT_KE = 2.0e4  # N/m per node
 
 
 def _pose(z, x=0.0, y=0.0):
     return np.array([x, y, z, 1.0, 0.0, 0.0, 0.0])
 
 
-def _cube_world(material, colliders, resolution=6, lift=0.0):
+def _cube_world(material, colliders, resolution=6, lift=0.0, contact_ke=PC.SOFT_CONTACT_KE):
     v, t = box_tetmesh((L, L, L), resolution)
-    w = SoftBodyWorld()
+    w = SoftBodyWorld(contact_ke=contact_ke)
     w.add_soft_body("cube", v, t, material, pose=_pose(PC.PARTICLE_RADIUS + lift))
     for name, he, local_z, mu in colliders:
         w.add_collider_box(name, he, local_pose=_pose(local_z), friction=mu)
@@ -34,7 +35,10 @@ def _compress(e_scale: float, strain: float = 0.02):
     # nu = 0: no lateral expansion, so plate friction cannot stiffen the response and the
     # reaction is exactly E * A * strain in linear elasticity. Friction stops any sideways drift.
     mat = SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.0, density=300.0, friction=1.0)
-    w = _cube_world(mat, [("table", (0.1, 0.1, 0.01), -0.01, 1.0), ("plate", (0.1, 0.1, 0.01), 0.01, 1.0)])
+    # Rigid plates: a stiff penalty contact (the package default is tuned for the pad coupling)
+    # so that the measured response is the FEM's, not the contact springs' in series.
+    w = _cube_world(mat, [("table", (0.1, 0.1, 0.01), -0.01, 1.0), ("plate", (0.1, 0.1, 0.01), 0.01, 1.0)],
+                    contact_ke=PLATE_CONTACT_KE)
     w.scale_materials(youngs_modulus=e_scale)
     top = PC.PARTICLE_RADIUS + L + PC.PARTICLE_RADIUS  # plate face touching the top nodes
     w.reset_collider_poses(np.stack([_pose(0.0), _pose(top + 1e-3)]))
@@ -121,9 +125,11 @@ def test_friction_holds_above_and_slips_below_the_coulomb_threshold():
     mu_hold, mu_slip = 4.0 * weight / (2 * normal), 0.25 * weight / (2 * normal)
     n_hold, fall_hold, _ = _pinch(mu_hold)
     n_slip, fall_slip, _ = _pinch(mu_slip)
-    print(f"pinch N={normal:.2f} N, W={weight:.3f} N: mu={mu_hold:.3f} fell {fall_hold*1e3:.2f} mm; "
-          f"mu={mu_slip:.4f} fell {fall_slip*1e3:.1f} mm")
-    assert n_hold == pytest.approx(normal, rel=0.15) and n_slip == pytest.approx(normal, rel=0.15)
+    print(f"pinch N={normal:.2f} N, W={weight:.3f} N: mu={mu_hold:.3f} N={n_hold:.2f} fell {fall_hold*1e3:.2f} mm; "
+          f"mu={mu_slip:.4f} N={n_slip:.2f} fell {fall_slip*1e3:.1f} mm")
+    # Each run's own measured normal force keeps it clearly on its side of the threshold
+    # (friction changes N a little: it restrains the bulge under the pads).
+    assert 2 * mu_hold * n_hold > 2.0 * weight and 2 * mu_slip * n_slip < 0.5 * weight
     assert fall_hold < 1e-3  # held: less than 1 mm of creep in 0.4 s
     assert fall_slip > 2e-2  # slipped: fell more than 2 cm
 

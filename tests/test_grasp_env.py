@@ -92,13 +92,13 @@ def test_env_state_restore_replays_bit_for_bit(env):
 
 def test_ood_rescaling_changes_only_its_factor(env):
     env.reset(seed=5)
-    nominal = env.unwrapped.evaluator_state()["cube"]
+    nominal = env.unwrapped.evaluator_state()["object"]
     env.reset(seed=5, options={"youngs_modulus_scale": 0.5})
-    soft = env.unwrapped.evaluator_state()["cube"]
+    soft = env.unwrapped.evaluator_state()["object"]
     assert soft["youngs_modulus"] == pytest.approx(0.5 * nominal["youngs_modulus"])
     assert soft["mass"] == pytest.approx(nominal["mass"], rel=1e-6)
     env.reset(seed=5, options={"mass_scale": 2.5})
-    heavy = env.unwrapped.evaluator_state()["cube"]
+    heavy = env.unwrapped.evaluator_state()["object"]
     assert heavy["mass"] == pytest.approx(2.5 * nominal["mass"], rel=1e-5)
     assert heavy["youngs_modulus"] == pytest.approx(nominal["youngs_modulus"])
     # Same seed, same placement: the rest poses differ only by the settling under the new load.

@@ -2,48 +2,55 @@
 
 | asset                | looks like                | rho kg/m3 |  E kPa | nu   | damping Pa*s | mu  |
 |----------------------|---------------------------|-----------|--------|------|--------------|-----|
-| soft_pastry001       | white swirled roll        | 250       | 40     | 0.25 | 1.0          | 0.9 |
-| soft_pastry002       | panda-face steamed bun    | 300       | 25     | 0.30 | 1.0          | 0.9 |
-| soft_pastry003       | small chocolate pastry    | 450       | 80     | 0.30 | 1.5          | 0.8 |
-| soft_stw_cube_hq     | foam cube                 | 150       | 50     | 0.30 | 1.0          | 1.0 |
-| soft_pastry005       | layered square pastry     | 350       | 40     | 0.25 | 1.0          | 0.8 |
-| soft_stw_cylinder_hq | foam cylinder             | 150       | 60     | 0.30 | 1.0          | 1.0 |
-| soft_pastry011       | golden brioche            | 280       | 35     | 0.25 | 1.0          | 0.9 |
-| soft_stw_cuboid_hq   | golden block (bread-like) | 280       | 50     | 0.30 | 1.0          | 0.9 |
-| soft_stw_sphere_hq   | foam ball                 | 150       | 30     | 0.35 | 1.0          | 1.0 |
-| soft_pastry010       | pumpkin bun               | 320       | 40     | 0.30 | 1.0          | 0.9 |
+| soft_pastry001       | white swirled roll        | 250       | 80     | 0.25 | 1.0          | 0.9 |
+| soft_pastry002       | panda-face steamed bun    | 300       | 70     | 0.30 | 1.0          | 0.9 |
+| soft_pastry003       | small chocolate pastry    | 450       | 150    | 0.30 | 1.5          | 0.8 |
+| soft_stw_cube_hq     | foam cube                 | 150       | 100    | 0.30 | 1.0          | 1.0 |
+| soft_pastry005       | layered square pastry     | 350       | 100    | 0.25 | 1.0          | 0.8 |
+| soft_stw_cylinder_hq | foam cylinder             | 150       | 100    | 0.30 | 1.0          | 1.0 |
+| soft_pastry011       | golden brioche            | 280       | 80     | 0.25 | 1.0          | 0.9 |
+| soft_stw_cuboid_hq   | golden block (bread-like) | 280       | 100    | 0.30 | 1.0          | 0.9 |
+| soft_stw_sphere_hq   | foam ball                 | 150       | 120    | 0.35 | 1.0          | 1.0 |
+| soft_pastry010       | pumpkin bun               | 320       | 90     | 0.30 | 1.0          | 0.9 |
 
 Where the orders of magnitude come from (literature ranges, rounded; not fitted to data):
 - Bread and bun crumb is a soft open-cell foam: apparent density ~200-350 kg/m3, compressive
-  (Young's) modulus ~10-100 kPa depending on recipe and staling, Poisson ratio ~0.2-0.3.
+  (Young's) modulus ~10-100 kPa depending on recipe and staling, Poisson ratio ~0.2-0.3. A whole
+  baked piece with its crust is stiffer than its crumb: apparent moduli of tens to a few
+  hundred kPa. We take 70-150 kPa, the upper part of that range, for a measured reason: at hex
+  resolution 6 the Panda's 10 N grasp (and the x0.5 modulus OOD shift on top of it) must stay
+  inside the FEM's valid range. With 25-40 kPa a binary close inverted tets under the pads
+  (point-like contact on the ball, the rounded tops of the buns).
 - Denser pastry (filled, chocolate-coated) is heavier (~400-500 kg/m3) and stiffer.
-- Flexible polyurethane foam (the primitives): modulus ~10-200 kPa, density 30-200 kg/m3;
+- Flexible polyurethane foam (the primitives): modulus ~10-200 kPa (we take 100-120 kPa), density 30-200 kg/m3;
   150 kg/m3 keeps the primitives' mass in the range of the pastries (10-20 g).
 - Friction of bread/foam on rubber pads is high, ~0.8-1.0.
 - ``damping`` is Newton's tet viscosity k_damp [Pa*s] on the strain rate; ~1 Pa*s gives a
-  strain relaxation time k_damp/E ~ 20-40 us, enough to kill FEM ringing without creep.
+  strain relaxation time k_damp/E ~ 10 us, enough to kill FEM ringing without creep.
 
 Rigid twins share mesh, texture, density and therefore mass; their modulus is raised by
-``RIGID_STIFFNESS_FACTOR`` so the Panda's 20 N grasp compresses them by well under 1 %.
+``RIGID_STIFFNESS_FACTOR`` (x10, 0.7-1.5 MPa: hard rubber) so the Panda's 10 N grasp deforms them
+an order of magnitude less than their soft asset (measured in the calibration cards). Stiffer
+twins make the one-tick-late pad coupling ring (contact stiffness vs finger inertia).
 """
 
 from __future__ import annotations
 
 # asset id -> (density, youngs_modulus, poisson_ratio, damping, friction)
 MATERIALS = {
-    "soft_pastry001": (250.0, 4.0e4, 0.25, 1.0, 0.9),
-    "soft_pastry002": (300.0, 2.5e4, 0.30, 1.0, 0.9),
-    "soft_pastry003": (450.0, 8.0e4, 0.30, 1.5, 0.8),
-    "soft_stw_cube_hq": (150.0, 5.0e4, 0.30, 1.0, 1.0),
-    "soft_pastry005": (350.0, 4.0e4, 0.25, 1.0, 0.8),
-    "soft_stw_cylinder_hq": (150.0, 6.0e4, 0.30, 1.0, 1.0),
-    "soft_pastry011": (280.0, 3.5e4, 0.25, 1.0, 0.9),
-    "soft_stw_cuboid_hq": (280.0, 5.0e4, 0.30, 1.0, 0.9),
-    "soft_stw_sphere_hq": (150.0, 3.0e4, 0.35, 1.0, 1.0),
-    "soft_pastry010": (320.0, 4.0e4, 0.30, 1.0, 0.9),
+    "soft_pastry001": (250.0, 8.0e+04, 0.25, 1.0, 0.9),
+    "soft_pastry002": (300.0, 7.0e+04, 0.30, 1.0, 0.9),
+    "soft_pastry003": (450.0, 1.5e+05, 0.30, 1.5, 0.8),
+    "soft_stw_cube_hq": (150.0, 1.0e+05, 0.30, 1.0, 1.0),
+    "soft_pastry005": (350.0, 1.0e+05, 0.25, 1.0, 0.8),
+    "soft_stw_cylinder_hq": (150.0, 1.0e+05, 0.30, 1.0, 1.0),
+    "soft_pastry011": (280.0, 8.0e+04, 0.25, 1.0, 0.9),
+    "soft_stw_cuboid_hq": (280.0, 1.0e+05, 0.30, 1.0, 0.9),
+    "soft_stw_sphere_hq": (150.0, 1.2e+05, 0.35, 1.0, 1.0),
+    "soft_pastry010": (320.0, 9.0e+04, 0.30, 1.0, 0.9),
 }
 
-RIGID_STIFFNESS_FACTOR = 200.0
+RIGID_STIFFNESS_FACTOR = 10.0
 
 # Props (rigid, simulated by SAPIEN; Newton sees them as colliders).
 PROP_FRICTION = {"table": 0.6, "basket": 0.7, "plate": 0.5, "distractor": 0.6}

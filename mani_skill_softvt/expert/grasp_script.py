@@ -21,7 +21,7 @@ DOWN = np.array([np.pi, 0.0, 0.0])  # axis-angle of a gripper pointing straight 
 class GraspPlan:
     """Heights are of the tool centre point above the table (m); durations in control steps."""
 
-    grasp_height: float = 0.025
+    grasp_height: float | None = None  # None: mid-height of the object (pads centred on it)
     approach_height: float = 0.12
     lift_height: float = 0.125
     closure: float = 1.0  # gripper closure while grasping (1 = close until the force limit)
@@ -30,8 +30,8 @@ class GraspPlan:
         "approach": 20, "descend": 20, "close": 20, "lift": 30, "hold": 40, "lower": 30, "open": 10, "retreat": 15,
     })
 
-    def phases(self, xy: np.ndarray):
-        lo = np.array([*xy, self.grasp_height])
+    def phases(self, xy: np.ndarray, grasp_height: float):
+        lo = np.array([*xy, grasp_height])
         hi = np.array([*xy, self.approach_height])
         up = np.array([*xy, self.lift_height])
         g_open, g_closed = 0.0, self.closure
@@ -50,14 +50,21 @@ def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> n
     return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], rotvec, [closure]]).astype(np.float32)
 
 
+def mid_height_grasp(nodes: np.ndarray) -> float:
+    """TCP height that centres the pads on the object, without the fingertips touching the table."""
+    return float(max(C.MIN_GRASP_HEIGHT, 0.5 * (nodes[:, 2].min() + nodes[:, 2].max())))
+
+
 def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None) -> dict:
     """Execute the script on an env that was just reset; return per-step records (numpy arrays)."""
     u = env.unwrapped
     plan = plan or GraspPlan()
-    xy = u.soft_nodes(object_name).mean(axis=0)[:2]
+    nodes = u.soft_nodes(object_name)
+    xy = nodes.mean(axis=0)[:2]
+    grasp_height = plan.grasp_height if plan.grasp_height is not None else mid_height_grasp(nodes)
     tcp = u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
     rec = {k: [] for k in ("phase", "deformation", "gripper_width", "object_min_z", "object_centroid", "tcp", "pad_force")}
-    for phase, target, g in plan.phases(xy):
+    for phase, target, g in plan.phases(xy, grasp_height):
         n = plan.steps[phase]
         start = tcp.copy()
         for i in range(n):

@@ -22,7 +22,7 @@ VBD_ITERATIONS = 5
 FRICTION_EPSILON = 1e-3
 
 # Particle-collider contact (penalty) stiffness [N/m] and damping, per contact point.
-SOFT_CONTACT_KE = 2.0e4
+SOFT_CONTACT_KE = 5.0e3
 SOFT_CONTACT_KD = 1.0e-2
 # Contact radius of FEM nodes [m]; Newton's default (0.1 m) would make 10 cm thick skins.
 PARTICLE_RADIUS = 1.0e-3

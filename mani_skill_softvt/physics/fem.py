@@ -411,6 +411,11 @@ class SoftBodyWorld:
         h = self._handle(body)
         return self.state_in.particle_qd.numpy()[h.particle_start : h.particle_start + h.particle_count].astype(np.float64)
 
+    def damp_velocities(self, factor: float) -> None:
+        """Scale every node velocity by ``factor`` (settling only: drains kinetic energy, e.g. rocking)."""
+        qd = self.state_in.particle_qd.numpy()
+        qd *= np.float32(factor)
+
     def _handle(self, body) -> SoftBodyHandle:
         return body if isinstance(body, SoftBodyHandle) else self.soft_bodies[body]
 

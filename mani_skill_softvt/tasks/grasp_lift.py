@@ -1,15 +1,16 @@
-"""SoftGraspLift-v1: grasp a soft cube from the table, lift it and hold it.
+"""SoftGraspLift-v1: grasp a soft object from the table, lift it and hold it.
 
 The foundation scene (no target container): the physics every suite builds on, used by the
 README demo, the coupling tests and the speed benchmark.
 
-**Task Description:** pick up the soft cube lying on the table and hold it 10 cm above the table.
+**Task Description:** pick up the object lying on the table (by default the soft cream-colored
+cube; any asset id or rigid twin via ``asset_id=...``) and hold it 10 cm above the table.
 
-**Randomizations:** the cube's xy position within +-2 cm of the nominal spot and its yaw
+**Randomizations:** the object's xy position within +-2 cm of the nominal spot and its yaw
 within +-15 deg (from the episode seed).
 
-**Success Conditions:** the cube's lowest node is at least 9 cm above the table and the cube
-is between the fingers.
+**Success Conditions:** the object's lowest node is at least 9 cm above the table and the
+object is between the fingers.
 """
 
 from __future__ import annotations
@@ -19,27 +20,22 @@ import sapien
 import torch
 from mani_skill.utils.registration import register_env
 
-from ..assets.tetmesh import box_tetmesh
-from ..physics.fem import SoftMaterial
-from ..physics.transforms import wxyz_to_xyzw  # noqa: F401
+from ..assets import load_card
 from . import constants as C
 from .soft_body_env import SoftBodyEnv, SoftObjectSpec
 
-CUBE_SIZE = 0.05
-CUBE_MATERIAL = SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, damping=1.0, friction=1.0)
+DEFAULT_ASSET = "soft_stw_cube_hq"
 NOMINAL_XY = np.array([0.0, 0.0])
 
 
 @register_env("SoftGraspLift-v1", max_episode_steps=C.MAX_EPISODE_STEPS)
 class SoftGraspLiftEnv(SoftBodyEnv):
-    def __init__(self, *args, cube_size: float = CUBE_SIZE, resolution: int = 6,
-                 material: SoftMaterial = CUBE_MATERIAL, **kwargs):
-        self.cube_size, self.resolution, self.material = cube_size, resolution, material
+    def __init__(self, *args, asset_id: str = DEFAULT_ASSET, **kwargs):
+        self.card = load_card(asset_id)
         super().__init__(*args, **kwargs)
 
     def _soft_object_specs(self):
-        v, t = box_tetmesh((self.cube_size,) * 3, self.resolution)
-        return [SoftObjectSpec("cube", v, t, self.material, color=(0.93, 0.87, 0.7, 1.0))]
+        return [SoftObjectSpec.from_card("object", self.card)]
 
     def _initialize_task(self, env_idx, options):
         rng = self._episode_rng
@@ -48,11 +44,10 @@ class SoftGraspLiftEnv(SoftBodyEnv):
         xy = NOMINAL_XY + rng.uniform(-0.02, 0.02, size=2)
         yaw = rng.uniform(-np.pi / 12, np.pi / 12)
         q = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
-        self.cube_yaw = yaw
-        return {"cube": np.array([xy[0], xy[1], 0.0, *q])}
+        return {"object": np.array([xy[0], xy[1], 0.0, *q])}
 
     def evaluate(self):
-        nodes = self.soft_nodes("cube")
+        nodes = self.soft_nodes("object")
         lifted = nodes[:, 2].min() >= 0.09
         tcp = self.agent.tcp.pose.p[0].cpu().numpy()
         between = np.linalg.norm(nodes.mean(axis=0)[:2] - tcp[:2]) < 0.03

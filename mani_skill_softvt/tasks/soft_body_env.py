@@ -22,7 +22,7 @@ through :meth:`SoftBodyEnv.evaluator_state` and never through observations.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import sapien
@@ -32,7 +32,7 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.structs.types import SimConfig
 
-from ..assets.tetmesh import surface_of_tets
+from ..assets.tetmesh import embed_points, surface_of_tets
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.deformation import deformation
@@ -50,6 +50,18 @@ class SoftObjectSpec:
     tets: np.ndarray  # (M, 4)
     material: SoftMaterial
     color: tuple = (0.9, 0.85, 0.7, 1.0)
+    # Visual meshes drawn deformed with the body: [(vertices (local), faces, rgba), ...].
+    # Empty: draw the tet mesh's own boundary in ``color``.
+    visual_parts: list = field(default_factory=list)
+
+    @classmethod
+    def from_card(cls, name: str, card) -> "SoftObjectSpec":
+        """Spec of an asset card (soft object or rigid twin)."""
+        from ..assets.cards import read_obj
+
+        v, t = card.tet_mesh()
+        parts = [(*read_obj(path), rgba) for _, path, rgba in card.visual_parts]
+        return cls(name, v, t, card.material(), tuple(card.color), parts)
 
 
 @dataclass
@@ -135,13 +147,18 @@ class SoftBodyEnv(BaseEnv):
             entity.set_name(f"soft/{spec.name}")
             sub_scene.add_entity(entity)
             self._render_entities[spec.name] = entity
-        self._surface = {n: surface_of_tets(s.tets) for n, s in self._specs.items()}
+        # What is drawn for each object: (rest vertices, faces, rgba, embedding tet index, weights).
+        self._visuals = {}
+        for n, spec in self._specs.items():
+            parts = spec.visual_parts or [(spec.vertices, surface_of_tets(spec.tets), spec.color)]
+            self._visuals[n] = [(f, rgba, *embed_points(v, spec.vertices, spec.tets)) for v, f, rgba in parts]
 
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
         self._build_soft_world()
 
     def _build_soft_world(self):
+        self._set_finger_inertia()
         world = SoftBodyWorld()
         for spec in self._specs.values():
             world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
@@ -170,6 +187,21 @@ class SoftBodyEnv(BaseEnv):
         world.finalize()
         self._world = world
         self._coupling = SapienNewtonCoupling(world, bodies)
+
+    def _set_finger_inertia(self):
+        """Give each finger the reflected inertia of the Franka gripper's geared drive.
+
+        Contact forces return to SAPIEN one tick late, which is stable only while
+        omega * dt < 2 with omega = sqrt(k_contact / m_finger). Against a stiff object (a rigid
+        twin) k_contact ~ 1e5 N/m, so the URDF's bare 15 g finger would be thrown off the object;
+        the geared gripper's reflected mass (~1 kg) is both realistic and stable.
+        """
+        for link in self.agent.robot.get_links():
+            if link.name in ("panda_leftfinger", "panda_rightfinger"):
+                body = link._objs[0]
+                scale = C.FINGER_EFFECTIVE_MASS / body.mass
+                body.set_mass(C.FINGER_EFFECTIVE_MASS)
+                body.set_inertia(np.asarray(body.inertia) * scale)
 
     # ------------------------------------------------------------------ episode
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
@@ -201,6 +233,9 @@ class SoftBodyEnv(BaseEnv):
         min_ticks = C.SIM_FREQ // 10
         while True:
             world.step()
+            # Settling is not part of the episode's physics: drain kinetic energy so that
+            # neutrally stable shapes (the ball) stop rocking instead of ringing for seconds.
+            world.damp_velocities(C.SETTLE_VELOCITY_DAMPING)
             ticks += 1
             v = max(float(np.abs(world.particle_qd(i)).max()) for i in range(len(self._specs)))
             if ticks >= min_ticks and v < speed:
@@ -245,18 +280,19 @@ class SoftBodyEnv(BaseEnv):
 
     def _update_render_meshes(self):
         for i, (name, entity) in enumerate(self._render_entities.items()):
-            spec = self._specs[name]
-            nodes = self._world.particle_q(i).astype(np.float32)
-            faces = self._surface[name]
-            shape = sapien.render.RenderShapeTriangleMesh(
-                vertices=nodes,
-                triangles=faces.astype(np.uint32),
-                normals=_vertex_normals(nodes, faces),
-                uvs=np.zeros((len(nodes), 2), np.float32),
-                material=sapien.render.RenderMaterial(base_color=list(spec.color), roughness=0.8),
-            )
+            nodes = self._world.particle_q(i)
+            tets = self._specs[name].tets
             body = sapien.render.RenderBodyComponent()
-            body.attach(shape)
+            for faces, rgba, tet_idx, weights in self._visuals[name]:
+                # Barycentric embedding: each visual vertex follows the tet it lies in.
+                verts = np.einsum("vk,vkd->vd", weights, nodes[tets[tet_idx]]).astype(np.float32)
+                body.attach(sapien.render.RenderShapeTriangleMesh(
+                    vertices=verts,
+                    triangles=faces.astype(np.uint32),
+                    normals=_vertex_normals(verts, faces),
+                    uvs=np.zeros((len(verts), 2), np.float32),
+                    material=sapien.render.RenderMaterial(base_color=list(rgba), roughness=0.8),
+                ))
             for old in [c for c in entity.components if isinstance(c, sapien.render.RenderBodyComponent)]:
                 entity.remove_component(old)
             entity.add_component(body)
@@ -296,6 +332,21 @@ class SoftBodyEnv(BaseEnv):
         q, qd, cq, wr = np.split(vec, np.cumsum(sizes)[:-1])
         w.set_state({"particle_q": q.reshape(-1, 3), "particle_qd": qd.reshape(-1, 3), "collider_q": cq.reshape(-1, 7)})
         self._coupling.wrenches = wr.reshape(n_c, 6).copy()
+        self._update_render_meshes()
+
+    def place_object(self, name: str, pose: np.ndarray, settle_time: float = 0.0) -> None:
+        """Teleport a soft object, in its rest shape, to ``pose`` [p, q_wxyz] (bottom at p).
+
+        For tests and scripted set-ups (success/drop predicates); x_0 is kept. With
+        ``settle_time`` the FEM runs that long with the robot frozen.
+        """
+        i = list(self._specs).index(name)
+        p = np.asarray(pose, dtype=np.float64).copy()
+        p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
+        self._world.set_soft_body_pose(i, p)
+        self._coupling.teleport()
+        for _ in range(int(round(settle_time * C.SIM_FREQ))):
+            self._world.step()
         self._update_render_meshes()
 
     # ------------------------------------------------------------------ evaluator-only

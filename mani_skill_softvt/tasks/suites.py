@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 # task id -> (soft asset id, object words in the Object suites, side and words in the Spatial suites)
 _TASK_TABLE = [
     ("soft_pastry001", "white swirled pastry", "left", "white swirled pastry"),
@@ -67,3 +69,44 @@ def task_spec(suite: str, task_id: int) -> TaskSpec:
 def list_tasks(suite: str) -> list[TaskSpec]:
     """All ten tasks of a suite, with their verbatim instructions."""
     return [task_spec(suite, i) for i in range(NUM_TASKS)]
+
+
+# The nine single-factor OOD conditions of the deformable suites (paper section 4; SPEC section 8):
+# name -> (reset option, value). Each reuses the ID task, initial state and seed.
+NOMINAL_FACTORS = {"light_intensity": 135.0, "mass_scale": 1.0, "youngs_modulus_scale": 1.0}
+OOD_CONDITIONS = {
+    "light_67.5": ("light_intensity", 67.5),
+    "light_180": ("light_intensity", 180.0),
+    "light_270": ("light_intensity", 270.0),
+    "mass_x1.25": ("mass_scale", 1.25),
+    "mass_x1.75": ("mass_scale", 1.75),
+    "mass_x2.5": ("mass_scale", 2.5),
+    "youngs_modulus_x0.5": ("youngs_modulus_scale", 0.5),
+    "youngs_modulus_x0.8": ("youngs_modulus_scale", 0.8),
+    "youngs_modulus_x2.0": ("youngs_modulus_scale", 2.0),
+}
+
+
+def resolve_ood(options: dict | None) -> dict:
+    """Physical factors of a reset: nominal, an ``ood`` condition by name, or explicit factors.
+
+    >>> resolve_ood({"ood": "mass_x2.5"})["mass_scale"]
+    2.5
+    """
+    options = options or {}
+    factors = dict(NOMINAL_FACTORS)
+    name = options.get("ood")
+    if name not in (None, "id"):
+        if name not in OOD_CONDITIONS:
+            raise ValueError(f"unknown OOD condition '{name}'; choose one of {sorted(OOD_CONDITIONS)} or 'id'")
+        key, value = OOD_CONDITIONS[name]
+        if key in options and float(options[key]) != value:
+            raise ValueError(f"reset options name OOD condition '{name}' but also {key}={options[key]}")
+        factors[key] = value
+    for key in NOMINAL_FACTORS:
+        if key in options:
+            value = float(options[key])
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"reset option {key} must be a positive finite number, got {options[key]!r}")
+            factors[key] = value
+    return factors

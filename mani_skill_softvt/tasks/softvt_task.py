@@ -1,0 +1,272 @@
+"""SoftVTBench pick-and-place: one parametrised task, registered once per suite.
+
+``SoftVTObjectSoft-v1``, ``SoftVTSpatialSoft-v1``, ``SoftVTObjectRigid-v1`` and
+``SoftVTSpatialRigid-v1`` are this class with ``suite`` preset; ``task_id`` (0-9) picks the
+object and instruction (see :func:`mani_skill_softvt.tasks.suites.list_tasks`).
+
+**Task Description:** follow the language instruction: pick up the named object (Object
+suites) or the named one of two identical instances (Spatial suites, "left"/"right" as seen
+from the robot, i.e. +y / -y) and place it in the basket (Object suites) or on the plate
+(Spatial suites). Object suites use the task's asset, Spatial suites two instances of it; the
+rigid suites use the rigid twins with the same layouts and instructions.
+
+**Randomizations** (all from the episode seed; OOD options never change them):
+- object placement: xy inside a per-suite support rectangle, yaw within +-15 deg;
+- target placement: the basket's / plate's xy inside its support rectangle;
+- robot initialisation: the rest joint configuration plus N(0, 0.02 rad) per arm joint.
+
+**Success Conditions:** the instructed instance is at rest (centroid slower than 2 cm/s), not
+held, with its centroid above the target region and its lowest node inside the region's
+height band. The other instance in the target does not count.
+
+**Failure (early termination):** ``dropped``: the object fell while not held outside the
+target (downward centroid speed above 0.25 m/s), or left the table.
+
+**Observation** (``obs_mode``): ``state`` (flat proprioception), ``state_dict``, ``rgb``
+(third-person ``base_camera`` and wrist ``hand_camera`` at 224x224) and ``rgb+tactile`` (plus
+both fingers' GelSight images and marker fields). ``agent`` holds joint positions/velocities,
+``extra`` the TCP pose and the jaw width; dict modes also carry ``instruction`` (a string).
+Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is in any mode; the
+evaluator reads :meth:`SoftBodyEnv.evaluator_state`.
+
+**Action** (7-D, ``control_mode``): ``pd_ee_pose`` (absolute TCP position in the robot base
+frame, axis-angle orientation, gripper closure in [0, 1]) or ``pd_ee_pose_binary`` (gripper
+< 0.5 open, >= 0.5 close until the 20 N force limit).
+
+**Reward:** sparse, 1 on success. **Episode end:** success, drop, or 300 control steps.
+
+**Reset options:** ``ood`` (one of :data:`~mani_skill_softvt.tasks.suites.OOD_CONDITIONS`) or
+the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_modulus_scale``.
+"""
+
+from __future__ import annotations
+
+import string
+
+import gymnasium as gym
+import numpy as np
+import sapien
+import torch
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+from mani_skill.utils.registration import register_env
+
+from ..assets import load_card, load_prop
+from . import constants as C
+from .soft_body_env import PropCollider, SoftBodyEnv, SoftObjectSpec
+from .suites import SUITES, TaskSpec, resolve_ood, task_spec
+
+OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
+
+
+class SoftVTTaskEnv(SoftBodyEnv):
+    """Pick-and-place of a soft (or rigid-twin) object named by a language instruction."""
+
+    SUPPORTED_OBS_MODES = OBS_MODES
+    SUPPORTED_REWARD_MODES = ("sparse", "none")
+
+    def __init__(self, *args, suite: str = "object_soft", task_id: int = 0, obs_mode: str | None = None,
+                 robot_init_qpos_noise: float = C.ROBOT_INIT_QPOS_NOISE, **kwargs):
+        self.task: TaskSpec = task_spec(suite, task_id)
+        self.card = load_card(self.task.asset_id)
+        self.robot_init_qpos_noise = robot_init_qpos_noise
+        obs_mode = obs_mode or "state"
+        if obs_mode not in OBS_MODES:
+            raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
+        self.tactile_enabled = obs_mode.endswith("+tactile")
+        if self.tactile_enabled:
+            from ..tactile import sensor as _tactile  # noqa: F401  (fails clearly if tactile is unavailable)
+        self._ready = False  # dict observations carry the instruction once ManiSkill's init is done
+        super().__init__(*args, obs_mode=obs_mode.replace("+tactile", ""), **kwargs)
+        # ManiSkill parsed the camera part ("rgb"); the public name keeps "+tactile".
+        self._obs_mode = obs_mode
+        self._ready = True
+
+    @property
+    def instruction(self) -> str:
+        return self.task.instruction
+
+    @property
+    def target_instance(self) -> str:
+        """Name of the instructed soft object: "object", or "left"/"right" in Spatial suites."""
+        return self.task.side or "object"
+
+    # ------------------------------------------------------------------ scene
+    def _soft_object_specs(self):
+        names = ["left", "right"] if self.task.side else ["object"]
+        return [SoftObjectSpec.from_card(n, self.card) for n in names]
+
+    def _load_props(self, options):
+        prop = load_prop(self.task.target)
+        b = self.scene.create_actor_builder()
+        for path in prop.collision_files:
+            b.add_convex_collision_from_file(str(path))
+        b.add_visual_from_file(str(prop.visual_file), material=sapien.render.RenderMaterial(
+            base_color=list(prop.color), roughness=0.8))
+        b.initial_pose = sapien.Pose(p=[0.0, 0.0, -1.0])
+        self.target = b.build_kinematic(name=self.task.target)
+        self.target_region = prop.regions["interior" if self.task.target == "basket" else "top"]
+        return [PropCollider(self.task.target, self.target._bodies[0], convex_parts=prop.convex_parts(),
+                             friction=prop.friction)]
+
+    def _load_lighting(self, options):
+        super()._load_lighting(options)
+        scene = self.scene.sub_scenes[0]
+        self._lights = [(e.components[0], np.array(e.components[0].color)) for e in scene.entities
+                        if e.name == "directional_light"]
+        self._ambient = np.array(self.scene.ambient_light)
+
+    def set_light_intensity(self, intensity: float) -> None:
+        """Scale every light by intensity / 135 (the paper's nominal dome-light intensity)."""
+        s = float(intensity) / C.NOMINAL_LIGHT_INTENSITY
+        for light, nominal in self._lights:
+            light.color = (nominal * s).tolist()
+        self.scene.ambient_light = (self._ambient * s).tolist()
+        self.light_intensity = float(intensity)
+
+    def live_light_intensity(self) -> float:
+        """Dome-light intensity read back from the renderer's ambient light (for audit receipts)."""
+        return float(np.asarray(self.scene.ambient_light)[0] / self._ambient[0] * C.NOMINAL_LIGHT_INTENSITY)
+
+    @property
+    def _default_sensor_configs(self):
+        pose = sapien_utils.look_at(eye=C.BASE_CAMERA_EYE, target=C.BASE_CAMERA_TARGET)
+        hand = self.agent.robot.links_map["camera_link"] if "camera_link" in self.agent.robot.links_map \
+            else self.agent.robot.links_map["panda_hand"]
+        return [
+            CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, C.BASE_CAMERA_FOV, 0.01, 100),
+            CameraConfig("hand_camera", sapien.Pose(p=C.WRIST_CAMERA_OFFSET, q=C.WRIST_CAMERA_Q), C.CAMERA_SIZE,
+                         C.CAMERA_SIZE, np.pi / 2, 0.01, 100, mount=hand),
+        ]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        pose = sapien_utils.look_at(eye=C.RENDER_CAMERA_EYE, target=C.RENDER_CAMERA_TARGET)
+        return CameraConfig("render_camera", pose, 512, 384, 1.0, 0.01, 100)
+
+    # ------------------------------------------------------------------ episode
+    def _initialize_task(self, env_idx, options):
+        # The layout is drawn first and always in the same order, so OOD resets with the ID seed
+        # reproduce the ID initial state exactly.
+        rng = self._episode_rng
+        layout = C.LAYOUTS[self.task.target]
+        qpos = C.ROBOT_REST_QPOS.copy()
+        qpos[:7] += rng.normal(0.0, self.robot_init_qpos_noise, 7)
+        obj_xy = np.asarray(layout["object_center"]) + rng.uniform(-1, 1, 2) * layout["object_half_range"]
+        yaws = rng.uniform(-C.OBJECT_YAW_RANGE, C.OBJECT_YAW_RANGE, 2)
+        tgt_xy = np.asarray(layout["target_center"]) + rng.uniform(-1, 1, 2) * layout["target_half_range"]
+        factors = resolve_ood(options)
+        self.set_light_intensity(factors["light_intensity"])
+        self.agent.reset(torch.as_tensor(qpos[None], dtype=torch.float32))
+        self.target.set_pose(sapien.Pose(p=[tgt_xy[0], tgt_xy[1], 0.0]))
+        self.ood_factors = factors
+        poses = {}
+        for k, name in enumerate(self._specs):
+            xy = obj_xy + (np.array([0.0, {"left": 1.0, "right": -1.0}[name] * C.SPATIAL_HALF_GAP])
+                           if self.task.side else 0.0)
+            q = np.array([np.cos(yaws[k] / 2), 0.0, 0.0, np.sin(yaws[k] / 2)])
+            poses[name] = np.array([xy[0], xy[1], 0.0, *q])
+        return poses
+
+    def _initialize_episode(self, env_idx, options):
+        options = dict(options)
+        factors = resolve_ood(options)
+        options["youngs_modulus_scale"] = factors["youngs_modulus_scale"]
+        options["mass_scale"] = factors["mass_scale"]
+        super()._initialize_episode(env_idx, options)
+        if self.tactile_enabled:
+            self._reset_tactile()
+
+    # ------------------------------------------------------------------ evaluation
+    def _object_kinematics(self, name: str) -> dict:
+        i = list(self._specs).index(name)
+        nodes = self._world.particle_q(i)
+        vel = self._world.particle_qd(i)
+        return {"centroid": nodes.mean(axis=0), "min_z": float(nodes[:, 2].min()),
+                "velocity": vel.mean(axis=0), "nodes": nodes}
+
+    def _in_target(self, kin: dict) -> bool:
+        lo, hi = (np.asarray(v) for v in self.target_region)
+        p = self.target.pose.p[0].cpu().numpy().astype(np.float64)
+        c = kin["centroid"] - p
+        inside_xy = np.all(c[:2] >= lo[:2]) and np.all(c[:2] <= hi[:2])
+        z = kin["min_z"] - p[2]
+        return bool(inside_xy and lo[2] - C.REGION_Z_TOLERANCE <= z <= hi[2])
+
+    def _is_grasped(self, kin: dict) -> bool:
+        forces = [np.linalg.norm(self._coupling.wrench(f"panda_{s}finger")[:3]) for s in ("left", "right")]
+        tcp = self.agent.tcp.pose.p[0].cpu().numpy()
+        near = np.linalg.norm(kin["centroid"] - tcp) < C.GRASP_CENTROID_DISTANCE
+        return bool(min(forces) > C.GRASP_MIN_FORCE and near)
+
+    def evaluate(self):
+        out = {}
+        for name in self._specs:
+            kin = self._object_kinematics(name)
+            grasped = self._is_grasped(kin)
+            in_target = self._in_target(kin)
+            at_rest = float(np.linalg.norm(kin["velocity"])) < C.REST_SPEED
+            off_table = kin["centroid"][2] < -C.OFF_TABLE_DEPTH or np.any(
+                np.abs(kin["centroid"][:2]) > np.asarray(C.TABLE_HALF_EXTENTS[:2]))
+            falling = kin["velocity"][2] < -C.DROP_SPEED and not grasped and not in_target
+            out[name] = dict(grasped=grasped, in_target=in_target, at_rest=at_rest, dropped=bool(off_table or falling))
+        t = out[self.target_instance]
+        success = t["in_target"] and t["at_rest"] and not t["grasped"]
+        dropped = any(o["dropped"] for o in out.values())
+        info = {
+            "success": success,
+            "fail": dropped and not success,
+            "is_grasped": t["grasped"],
+            "dropped": dropped,
+            "in_target": t["in_target"],
+            "other_in_target": any(o["in_target"] for n, o in out.items() if n != self.target_instance),
+        }
+        return {k: torch.tensor([bool(v)]) for k, v in info.items()}
+
+    def compute_sparse_reward(self, obs, action, info):
+        return info["success"].float()
+
+    # ------------------------------------------------------------------ observations
+    def _get_obs_extra(self, info):
+        width = torch.tensor([[self.gripper_width]], dtype=torch.float32)
+        return {"tcp_pose": self.agent.tcp.pose.raw_pose, "gripper_width": width}
+
+    def _get_obs_with_sensor_data(self, info, apply_texture_transforms=True):
+        obs = super()._get_obs_with_sensor_data(info, apply_texture_transforms)
+        if self.tactile_enabled:
+            obs["tactile"] = self._tactile_obs()
+        return obs
+
+    def _flatten_raw_obs(self, obs):
+        obs = super()._flatten_raw_obs(obs)
+        if self._ready and isinstance(obs, dict) and self._obs_mode != "none":
+            obs["instruction"] = self.instruction
+        return obs
+
+    @property
+    def single_observation_space(self):
+        # ManiSkill derives spaces from tensors; the instruction is text.
+        space = self.__dict__.get("_obs_space_cache")
+        if space is None:
+            from mani_skill.utils import common, gym_utils
+
+            space = gym_utils.convert_observation_to_space(common.to_numpy(self._init_raw_obs), unbatched=True)
+            if isinstance(space, gym.spaces.Dict) and self._obs_mode != "none":
+                space = gym.spaces.Dict({**space.spaces, "instruction": gym.spaces.Text(C.MAX_INSTRUCTION_LENGTH, charset=string.printable)})
+            self.__dict__["_obs_space_cache"] = space
+        return space
+
+    @single_observation_space.deleter
+    def single_observation_space(self):
+        self.__dict__.pop("_obs_space_cache", None)
+
+    # ------------------------------------------------------------------ tactile
+    def _reset_tactile(self):
+        raise NotImplementedError("tactile sensing is wired in by the tactile-sensor issue")
+
+    def _tactile_obs(self):
+        raise NotImplementedError("tactile sensing is wired in by the tactile-sensor issue")
+
+
+for _suite, (_env_id, _layout, _kind) in SUITES.items():
+    register_env(_env_id, max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite)(SoftVTTaskEnv)

@@ -1,0 +1,219 @@
+"""The four SoftVTBench suites as ManiSkill envs: registration, predicates, seeds, OOD, no leaks."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import mani_skill_softvt  # noqa: F401  (registers the envs)
+from mani_skill_softvt.expert.grasp_script import ee_action
+from mani_skill_softvt.tasks import constants as C
+from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS, SUITES, list_tasks
+
+ENV_IDS = [v[0] for v in SUITES.values()]
+
+
+def _hold_still(env, closure=0.0):
+    """An action that keeps the TCP where it is."""
+    tcp = env.unwrapped.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
+    return ee_action(tcp, closure)
+
+
+def _step_info(env, n=1):
+    for _ in range(n):
+        _, _, terminated, truncated, info = env.step(_hold_still(env))
+    return {k: bool(v[0]) if isinstance(v, torch.Tensor) and v.numel() == 1 and v.dtype == torch.bool else v
+            for k, v in info.items()}, bool(terminated[0])
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_every_task_makes_resets_and_steps(env_id):
+    suite = next(s for s, v in SUITES.items() if v[0] == env_id)
+    for task_id in range(NUM_TASKS):
+        env = gym.make(env_id, task_id=task_id, obs_mode="state")
+        obs, info = env.reset(seed=task_id)
+        assert env.unwrapped.settle_info["settled"]
+        assert env.unwrapped.instruction == list_tasks(suite)[task_id].instruction
+        obs, rew, term, trunc, info = env.step(_hold_still(env))
+        assert obs.shape == env.observation_space.shape and torch.isfinite(obs).all()
+        assert not bool(info["success"][0]) and not bool(info["dropped"][0])
+        env.close()
+
+
+def test_task_list_and_registration_errors():
+    assert len(list_tasks("spatial_rigid")) == NUM_TASKS
+    with pytest.raises(ValueError, match="task_id"):
+        gym.make("SoftVTObjectSoft-v1", task_id=10)
+    with pytest.raises(ValueError, match="obs_mode"):
+        gym.make("SoftVTObjectSoft-v1", task_id=0, obs_mode="pointcloud")
+
+
+@pytest.fixture(scope="module")
+def object_env():
+    env = gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="state")
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def spatial_env():
+    env = gym.make("SoftVTSpatialRigid-v1", task_id=1, obs_mode="state")  # "right" instance
+    yield env
+    env.close()
+
+
+def _target_pose(env, dz=0.0):
+    u = env.unwrapped
+    lo, hi = (np.asarray(v) for v in u.target_region)
+    p = u.target.pose.p[0].cpu().numpy().astype(np.float64)
+    return np.array([p[0] + 0.5 * (lo[0] + hi[0]), p[1] + 0.5 * (lo[1] + hi[1]), p[2] + lo[2] + dz, 1, 0, 0, 0])
+
+
+def test_object_at_rest_in_basket_succeeds_and_outside_does_not(object_env):
+    env, u = object_env, object_env.unwrapped
+    env.reset(seed=1)
+    info, _ = _step_info(env, 3)
+    assert not info["success"] and not info["in_target"]
+    u.place_object("object", _target_pose(env), settle_time=0.5)
+    info, terminated = _step_info(env, 2)
+    assert info["in_target"] and info["success"] and terminated
+    # Beside the basket, on the table, at rest: not a success.
+    env.reset(seed=1)
+    beside = _target_pose(env)
+    beside[1] += 0.15
+    beside[2] = 0.0
+    u.place_object("object", beside, settle_time=0.5)
+    info, _ = _step_info(env, 2)
+    assert not info["success"] and not info["in_target"] and not info["dropped"]
+
+
+def test_spatial_success_checks_the_instance(spatial_env):
+    env, u = spatial_env, spatial_env.unwrapped
+    assert u.target_instance == "right"
+    env.reset(seed=2)
+    u.place_object("left", _target_pose(env), settle_time=0.5)
+    info, _ = _step_info(env, 2)
+    assert info["other_in_target"] and not info["in_target"] and not info["success"]
+    env.reset(seed=2)
+    u.place_object("right", _target_pose(env), settle_time=0.5)
+    info, _ = _step_info(env, 2)
+    assert info["in_target"] and info["success"]
+
+
+def test_a_drop_is_detected_and_ends_the_episode(object_env):
+    env, u = object_env, object_env.unwrapped
+    env.reset(seed=3)
+    centroid = u.soft_nodes("object").mean(axis=0)
+    # Released 10 cm above the table, away from the basket: free fall reaches 0.25 m/s after 3 mm.
+    u.place_object("object", np.array([centroid[0], centroid[1], 0.10, 1, 0, 0, 0]))
+    for _ in range(6):
+        info, terminated = _step_info(env)
+        if info["dropped"]:
+            break
+    assert info["dropped"] and info["fail"] and terminated and not info["success"]
+
+
+def test_same_seed_same_initial_state_and_different_seed_differs(object_env):
+    env = object_env
+    env.reset(seed=11)
+    a = env.unwrapped.get_state().clone()
+    env.reset(seed=11)
+    b = env.unwrapped.get_state().clone()
+    env.reset(seed=12)
+    c = env.unwrapped.get_state().clone()
+    assert torch.equal(a, b)
+    assert not torch.allclose(a, c)
+
+
+@pytest.mark.parametrize("condition", sorted(OOD_CONDITIONS))
+def test_ood_options_change_exactly_their_factor(object_env, condition):
+    env, u = object_env, object_env.unwrapped
+    env.reset(seed=7)
+    nominal = _factors(u)
+    layout = _layout(u)
+    env.reset(seed=7, options={"ood": condition})
+    shifted = _factors(u)
+    key, value = OOD_CONDITIONS[condition]
+    expected = dict(nominal)
+    expected[key] = value if key == "light_intensity" else nominal[key] * value
+    for k in nominal:
+        assert shifted[k] == pytest.approx(expected[k], rel=1e-5), k
+    # Same initial state as the ID episode: robot, target and object placement.
+    shifted_layout = _layout(u)
+    np.testing.assert_array_equal(layout["qpos"], shifted_layout["qpos"])
+    np.testing.assert_array_equal(layout["target"], shifted_layout["target"])
+    # The object settles under its own (possibly heavier or softer) weight: sub-millimetre.
+    np.testing.assert_allclose(layout["object_xy"], shifted_layout["object_xy"], atol=1e-3)
+
+
+def _factors(u):
+    ev = u.evaluator_state()["object"]
+    return {"light_intensity": u.live_light_intensity(), "mass_scale": ev["mass"], "youngs_modulus_scale": ev["youngs_modulus"]}
+
+
+def _layout(u):
+    return {"qpos": u.agent.robot.get_qpos()[0].cpu().numpy().copy(),
+            "target": u.target.pose.raw_pose[0].cpu().numpy().copy(),
+            "object_xy": u.soft_nodes("object").mean(axis=0)[:2].copy()}
+
+
+def test_bad_reset_options_are_rejected(object_env):
+    with pytest.raises(ValueError, match="unknown OOD condition"):
+        object_env.reset(seed=0, options={"ood": "gravity_x2"})
+    with pytest.raises(ValueError, match="positive finite"):
+        object_env.reset(seed=0, options={"mass_scale": -1.0})
+
+
+# --------------------------------------------------------------------------- no leaks
+EVALUATOR_KEYWORDS = ("node", "x0", "deform", "young", "mass", "material", "centroid", "object_pose", "soft")
+
+
+def _leaves(obs, prefix=""):
+    if isinstance(obs, dict):
+        for k, v in obs.items():
+            yield from _leaves(v, f"{prefix}/{k}")
+    else:
+        yield prefix, obs
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("obs_mode", ["state", "state_dict", "rgb"])
+def test_no_evaluator_quantity_reaches_the_observation(env_id, obs_mode):
+    env = gym.make(env_id, task_id=4, obs_mode=obs_mode)
+    obs, _ = env.reset(seed=0)
+    obs, *_ = env.step(_hold_still(env))
+    u = env.unwrapped
+    secrets = []
+    for name, ev in u.evaluator_state().items():
+        if name == "pad_wrenches":
+            continue
+        secrets += [ev["centroid"], ev["nodes"][::7].ravel(), ev["x0"][::7].ravel(),
+                    [ev["deformation"], ev["youngs_modulus"], ev["mass"]]]
+    secrets = np.concatenate([np.ravel(s) for s in secrets]).astype(np.float32)
+    for path, leaf in _leaves(obs):
+        assert not any(k in path.lower() for k in EVALUATOR_KEYWORDS), path
+        if isinstance(leaf, str):
+            assert leaf == u.instruction
+            continue
+        values = leaf.cpu().numpy() if isinstance(leaf, torch.Tensor) else np.asarray(leaf)
+        if values.dtype.kind != "f" or path.endswith("sensor_param") or "sensor_param" in path:
+            continue  # images (uint8) and camera intrinsics/extrinsics carry no object state
+        v = values.ravel()
+        # No float in the observation equals an evaluator quantity (node coordinates, centroid,
+        # E, mass, D) to 1e-7 relative: nothing was copied over.
+        close = np.isclose(v[:, None], secrets[None, :], rtol=1e-7, atol=0.0) & (np.abs(secrets[None, :]) > 1e-3)
+        assert not close.any(), f"{path} contains evaluator values"
+    if obs_mode != "state":
+        assert obs["instruction"] == u.instruction
+    env.close()
+
+
+def test_tactile_obs_mode_is_explained_until_the_sensor_exists():
+    try:
+        env = gym.make("SoftVTObjectSoft-v1", task_id=0, obs_mode="rgb+tactile")
+    except (ImportError, NotImplementedError) as e:
+        assert "tactile" in str(e)
+    else:
+        obs, _ = env.reset(seed=0)
+        assert set(obs["tactile"]) == {"left", "right"}
+        env.close()
