@@ -10,18 +10,12 @@ writes an image strip (one frame per phase) and, with ``--video``, an mp4 of the
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-
-def _atomic_write(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    write(tmp)
-    os.replace(tmp, path)
+from .io import atomic_write
 
 
 def main(argv=None) -> dict:
@@ -71,9 +65,9 @@ def main(argv=None) -> dict:
     }
     out = args.out
     strip_img = np.concatenate([phase_end[p] for p in plan.steps if p in phase_end], axis=1)
-    _atomic_write(out / "grasp_strip.png", lambda p: imageio.imwrite(p, strip_img))
+    atomic_write(out / "grasp_strip.png", lambda p: imageio.imwrite(p, strip_img))
     if args.video:
-        _atomic_write(out / "grasp.mp4", lambda p: imageio.mimwrite(p, frames, fps=20, macro_block_size=1))
+        atomic_write(out / "grasp.mp4", lambda p: imageio.mimwrite(p, frames, fps=20, macro_block_size=1))
     print("peak normalised deformation D_max = {peak_deformation:.4f}".format(**result))
     print("lift height (lowest node, hold) = {:.1f} mm, slip over the hold = {:.2f} mm, jaw gap = {:.1f} mm".format(
         lift_height * 1e3, slip * 1e3, result["grasp_width_m"] * 1e3))

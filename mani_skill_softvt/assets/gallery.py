@@ -11,8 +11,6 @@ only the stiffness in the label differs).
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
@@ -20,6 +18,7 @@ import numpy as np
 import sapien
 from tqdm import tqdm
 
+from ..io import atomic_write
 from ..paths import REPO_DIR
 from .cards import ASSET_IDS, TWIN_IDS, AssetCard, load_card, read_obj
 
@@ -109,14 +108,11 @@ def _look_at(forward: np.ndarray) -> np.ndarray:
 
 
 def save_png(image: np.ndarray, out: Path) -> None:
-    """Write atomically: a reader never sees a half-written image."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=out.parent)
-    os.close(fd)
-    if not cv2.imwrite(tmp, cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-        os.unlink(tmp)
-        raise OSError(f"could not write {out}")
-    os.replace(tmp, out)
+    """Write an RGB image as PNG, atomically."""
+    def write(tmp: Path):
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
+            raise OSError(f"could not write {out}")
+    atomic_write(Path(out), write)
 
 
 def main(argv=None) -> None:

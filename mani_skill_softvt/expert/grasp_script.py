@@ -55,17 +55,24 @@ def mid_height_grasp(nodes: np.ndarray) -> float:
     return float(max(C.MIN_GRASP_HEIGHT, 0.5 * (nodes[:, 2].min() + nodes[:, 2].max())))
 
 
-def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None) -> dict:
-    """Execute the script on an env that was just reset; return per-step records (numpy arrays)."""
+def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None,
+                     xy_offset=(0.0, 0.0)) -> dict:
+    """Execute the script on an env that was just reset; return per-step records (numpy arrays).
+
+    ``on_step(phase, i, n)`` is called after every control step; returning ``"stop"`` ends the
+    script early (e.g. a calibration trial whose object was not lifted).
+    """
     u = env.unwrapped
     plan = plan or GraspPlan()
     nodes = u.soft_nodes(object_name)
-    xy = nodes.mean(axis=0)[:2]
+    xy = nodes.mean(axis=0)[:2] + np.asarray(xy_offset, np.float64)
     grasp_height = plan.grasp_height if plan.grasp_height is not None else mid_height_grasp(nodes)
     tcp = u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
-    rec = {k: [] for k in ("phase", "deformation", "gripper_width", "object_min_z", "object_centroid", "tcp", "pad_force")}
+    rec = {k: [] for k in ("phase", "deformation", "gripper_width", "object_min_z", "object_centroid", "tcp",
+                           "tcp_quat", "pad_force")}
+    stop = False
     for phase, target, g in plan.phases(xy, grasp_height):
-        n = plan.steps[phase]
+        n = plan.steps.get(phase, 0)
         start = tcp.copy()
         for i in range(n):
             a = min(1.0, (i + 1) / max(1, n - 2))  # reach the waypoint two steps early, then settle
@@ -78,8 +85,12 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
             rec["object_min_z"].append(float(nodes[:, 2].min()))
             rec["object_centroid"].append(nodes.mean(axis=0))
             rec["tcp"].append(u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64))
+            rec["tcp_quat"].append(u.agent.tcp.pose.q[0].cpu().numpy().astype(np.float64))
             rec["pad_force"].append(float(np.linalg.norm(u._coupling.wrench("panda_leftfinger")[:3])))
-            if on_step is not None:
-                on_step(phase, i, n)
+            if on_step is not None and on_step(phase, i, n) == "stop":
+                stop = True
+                break
+        if stop:
+            break
         tcp = target
     return {k: np.asarray(v) for k, v in rec.items()}

@@ -1,0 +1,122 @@
+"""Per-object calibration: gripper envelope [g_min, g_max] and deformation tolerance tau_o.
+
+    python -m mani_skill_softvt.calibrate                       # all ten deformable assets
+    python -m mani_skill_softvt.calibrate --assets soft_stw_cube_hq --workers 1
+    python -m mani_skill_softvt.calibrate --quick               # one asset, four closures, one repeat
+
+For each asset: the scripted grasp, lift and 2 s hold at every closure from loose to tight,
+several repeats with small pose jitter; slip is measured from the object's motion relative to
+the hand. Writes ``calibration/<asset>.json`` (card with every sweep record, so any percentile
+can be recomputed), ``calibration/plots/<asset>.png`` and ``calibration/plots/summary.png``.
+Interrupted runs resume: finished trials are kept in ``calibration/.sweeps/<asset>.jsonl``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from .assets.cards import ASSET_IDS
+from .calibration import protocol as P
+from .paths import CALIBRATION_DIR
+
+QUICK_ASSET = "soft_stw_cube_hq"
+QUICK_CLOSURES = (0.3, 0.5, 0.7, 0.9)
+
+
+def calibrate_asset(asset_id: str, closures=P.CLOSURES, repeats: int = P.REPEATS, percentile: float = P.PERCENTILE,
+                    out: Path = CALIBRATION_DIR, queue=None, write: bool = True) -> dict:
+    """Sweep one asset (resuming from its log) and write its card and plot; return the card."""
+    from .calibration.cards import make_card, write_card
+    from .calibration.plots import plot_card
+    from .calibration.sweep import sweep_asset
+
+    out = Path(out)
+    log = out / ".sweeps" / f"{asset_id}.jsonl"
+
+    def progress(n, total):
+        if queue is not None:
+            queue.put((asset_id, n, total))
+
+    records = sweep_asset(asset_id, ASSET_IDS.index(asset_id), closures, repeats, log, progress)
+    card = make_card(asset_id, records, percentile, closures, repeats)
+    if write:
+        write_card(card, out)
+        plot_card(card, out / "plots" / f"{asset_id}.png")
+    return card
+
+
+def main(argv=None) -> list[dict]:
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.calibrate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--assets", nargs="+", default=None, help=f"deformable asset ids (default: all ten; quick: {QUICK_ASSET})")
+    ap.add_argument("--workers", type=int, default=1, help="assets calibrated in parallel processes")
+    ap.add_argument("--repeats", type=int, default=None, help=f"trials per closure (default {P.REPEATS}; quick {P.QUICK_REPEATS})")
+    ap.add_argument("--closures", type=float, nargs="+", default=None, help="closures to sweep (default: 0.10 to 1.0 by 0.05)")
+    ap.add_argument("--percentile", type=float, default=P.PERCENTILE)
+    ap.add_argument("--quick", action="store_true", help="one asset, four closures, one repeat (smoke test)")
+    ap.add_argument("--out", type=Path, default=CALIBRATION_DIR)
+    args = ap.parse_args(argv)
+
+    assets = args.assets or ([QUICK_ASSET] if args.quick else list(ASSET_IDS))
+    unknown = [a for a in assets if a not in ASSET_IDS]
+    if unknown:
+        ap.error(f"unknown or non-deformable assets {unknown}; choose from {list(ASSET_IDS)}")
+    closures = tuple(args.closures or (QUICK_CLOSURES if args.quick else P.CLOSURES))
+    if any(not 0.0 <= g <= 1.0 for g in closures):
+        ap.error(f"closures must lie in [0, 1], got {closures}")
+    repeats = args.repeats or (P.QUICK_REPEATS if args.quick else P.REPEATS)
+    if args.workers < 1:
+        ap.error("--workers must be >= 1")
+
+    from tqdm import tqdm
+
+    total = len(assets) * len(closures) * repeats
+    bar = tqdm(total=total, desc="calibration trials", unit="trial")
+    manager = mp.Manager()
+    queue = manager.Queue()
+    cards = []
+    ctx = mp.get_context("spawn")  # Warp and SAPIEN do not survive fork
+    with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as pool:
+        futures = {pool.submit(calibrate_asset, a, closures, repeats, args.percentile, args.out, queue): a for a in assets}
+        pending = set(futures)
+        while pending:
+            while not queue.empty():
+                asset, n, _ = queue.get()
+                bar.update(n)
+                bar.set_postfix_str(asset)
+            finished = {f for f in pending if f.done()}
+            for f in finished:
+                cards.append(f.result())  # re-raises a worker's error with its traceback
+                tqdm.write(_row(cards[-1]))
+            pending -= finished
+            if pending:
+                import time
+
+                time.sleep(0.5)
+        while not queue.empty():
+            bar.update(queue.get()[1])
+    bar.close()
+    if len(assets) > 1 or not args.quick:
+        from .calibration.cards import load_calibration
+        from .calibration.plots import plot_summary
+
+        all_cards = []
+        for a in ASSET_IDS:
+            try:
+                all_cards.append(load_calibration(a, args.out))
+            except FileNotFoundError:
+                pass
+        plot_summary(all_cards, Path(args.out) / "plots" / "summary.png")
+    return cards
+
+
+def _row(card: dict) -> str:
+    return (f"{card['asset_id']:22s} g_min {card['g_min']:.2f}  g_max {card['g_max']:.2f}  "
+            f"span {card['span_mm']:5.1f} mm  tau_o {100 * card['tau_o']:.2f} % diag")
+
+
+if __name__ == "__main__":
+    main()
