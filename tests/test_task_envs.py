@@ -177,7 +177,7 @@ def _leaves(obs, prefix=""):
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
-@pytest.mark.parametrize("obs_mode", ["state", "state_dict", "rgb"])
+@pytest.mark.parametrize("obs_mode", ["state", "state_dict", "rgb", "rgb+tactile"])
 def test_no_evaluator_quantity_reaches_the_observation(env_id, obs_mode):
     env = gym.make(env_id, task_id=4, obs_mode=obs_mode)
     obs, _ = env.reset(seed=0)
@@ -208,12 +208,25 @@ def test_no_evaluator_quantity_reaches_the_observation(env_id, obs_mode):
     env.close()
 
 
-def test_tactile_obs_mode_is_explained_until_the_sensor_exists():
-    try:
-        env = gym.make("SoftVTObjectSoft-v1", task_id=0, obs_mode="rgb+tactile")
-    except (ImportError, NotImplementedError) as e:
-        assert "tactile" in str(e)
-    else:
-        obs, _ = env.reset(seed=0)
-        assert set(obs["tactile"]) == {"left", "right"}
-        env.close()
+def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
+    from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
+
+    env = gym.make("SoftVTObjectRigid-v1", task_id=3, obs_mode="rgb+tactile")
+    obs, _ = env.reset(seed=0)
+    for side in ("left", "right"):
+        t = obs["tactile"][side]
+        assert t["rgb"].shape == (1, 240, 320, 3) and t["marker_current"].shape == (1, 99, 2)
+        # Open gripper, nothing touches the gel: the sensor's reference frame, markers at rest.
+        assert torch.equal(t["marker_current"], t["marker_initial"])
+    plan = GraspPlan(closure=0.8)
+    plan.steps = {**plan.steps, "lift": 0, "hold": 0, "lower": 0, "open": 0, "retreat": 0}
+    run_grasp_script(env, plan)
+    obs = env.unwrapped.get_obs()
+    for side in ("left", "right"):
+        t = obs["tactile"][side]
+        assert not torch.equal(t["rgb"], obs_before(env, side)), side
+    env.close()
+
+
+def obs_before(env, side):
+    return torch.from_numpy(env.unwrapped._tactile[side].background_frame[None])

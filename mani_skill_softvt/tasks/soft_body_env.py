@@ -95,6 +95,7 @@ class SoftBodyEnv(BaseEnv):
         self._coupling: SapienNewtonCoupling | None = None
         self._render_entities: dict[str, sapien.Entity] = {}
         self._x0: dict[str, np.ndarray] = {}
+        self._tactile: dict = {}  # side -> TactileSensor, created on first use
         self.settle_info: dict = {}
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
@@ -147,6 +148,7 @@ class SoftBodyEnv(BaseEnv):
             entity.set_name(f"soft/{spec.name}")
             sub_scene.add_entity(entity)
             self._render_entities[spec.name] = entity
+        self._boundary = {n: surface_of_tets(spec.tets) for n, spec in self._specs.items()}
         # What is drawn for each object: (rest vertices, faces, rgba, embedding tet index, weights).
         self._visuals = {}
         for n, spec in self._specs.items():
@@ -221,6 +223,8 @@ class SoftBodyEnv(BaseEnv):
         self._coupling.teleport()
         self.settle()
         self._update_render_meshes()
+        for sensor in self._tactile.values():
+            sensor.reset()
 
     def settle(self, speed: float = C.SETTLE_SPEED, max_time: float = C.SETTLE_MAX_TIME) -> dict:
         """Let the soft objects come to rest on their supports (Newton only, robot frozen).
@@ -296,6 +300,45 @@ class SoftBodyEnv(BaseEnv):
             for old in [c for c in entity.components if isinstance(c, sapien.render.RenderBodyComponent)]:
                 entity.remove_component(old)
             entity.add_component(body)
+
+    # ------------------------------------------------------------------ tactile
+    def _deformed_body_meshes(self) -> tuple[np.ndarray, np.ndarray]:
+        """World vertices and faces of every object's deformed FEM boundary: the surface the pads
+        actually touch (the finer visual mesh is embedded and may sit slightly outside it)."""
+        verts, faces, offset = [], [], 0
+        for i, name in enumerate(self._specs):
+            nodes = self._world.particle_q(i)
+            verts.append(nodes)
+            faces.append(self._boundary[name] + offset)
+            offset += len(nodes)
+        return np.concatenate(verts), np.concatenate(faces)
+
+    def pad_poses(self) -> dict[str, np.ndarray]:
+        """4x4 world pose of each finger's gel surface (tactile pad frame, see tactile.sensor)."""
+        from ..tactile import pad_frame
+
+        links = {s: self.agent.robot.links_map[f"panda_{s}finger"].pose.to_transformation_matrix()[0].cpu().numpy()
+                 for s in ("left", "right")}
+        centre = {s: links[s][:3, :3] @ np.asarray(C.FINGERTIP_OFFSET[s]) + links[s][:3, 3] for s in links}
+        hand = self.agent.robot.links_map["panda_hand"].pose.to_transformation_matrix()[0].cpu().numpy()
+        out = {}
+        for side, other, sign in (("left", "right", 1.0), ("right", "left", -1.0)):
+            normal = centre[other] - centre[side]
+            normal /= np.linalg.norm(normal)
+            # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
+            # contact radius) plus the tactile contact margin.
+            face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS + C.TACTILE_CONTACT_MARGIN)
+            out[side] = pad_frame(face, normal, sign * hand[:3, 0].astype(np.float64))
+        return out
+
+    def tactile_frames(self) -> dict:
+        """GelSight frames of both fingers for the current state (side -> TactileFrame)."""
+        if not self._tactile:
+            from ..tactile import TactileSensor
+
+            self._tactile = {s: TactileSensor(s) for s in ("left", "right")}
+        verts, faces = self._deformed_body_meshes()
+        return {side: self._tactile[side].render(verts, faces, pose) for side, pose in self.pad_poses().items()}
 
     # ------------------------------------------------------------------ state
     def get_state_dict(self):

@@ -74,8 +74,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
         self.tactile_enabled = obs_mode.endswith("+tactile")
-        if self.tactile_enabled:
-            from ..tactile import sensor as _tactile  # noqa: F401  (fails clearly if tactile is unavailable)
         self._ready = False  # dict observations carry the instruction once ManiSkill's init is done
         super().__init__(*args, obs_mode=obs_mode.replace("+tactile", ""), **kwargs)
         # ManiSkill parsed the camera part ("rgb"); the public name keeps "+tactile".
@@ -174,8 +172,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         options["youngs_modulus_scale"] = factors["youngs_modulus_scale"]
         options["mass_scale"] = factors["mass_scale"]
         super()._initialize_episode(env_idx, options)
-        if self.tactile_enabled:
-            self._reset_tactile()
 
     # ------------------------------------------------------------------ evaluation
     def _object_kinematics(self, name: str) -> dict:
@@ -260,12 +256,14 @@ class SoftVTTaskEnv(SoftBodyEnv):
     def single_observation_space(self):
         self.__dict__.pop("_obs_space_cache", None)
 
-    # ------------------------------------------------------------------ tactile
-    def _reset_tactile(self):
-        raise NotImplementedError("tactile sensing is wired in by the tactile-sensor issue")
-
-    def _tactile_obs(self):
-        raise NotImplementedError("tactile sensing is wired in by the tactile-sensor issue")
+    def _tactile_obs(self) -> dict:
+        """Per finger: the 320x240 GelSight image and the 11x9 marker field (initial and current px)."""
+        out = {}
+        for side, f in self.tactile_frames().items():
+            out[side] = {"rgb": torch.from_numpy(f.image[None].copy()),
+                         "marker_initial": torch.from_numpy(f.marker_initial[None].copy()),
+                         "marker_current": torch.from_numpy(f.marker_current[None].copy())}
+        return out
 
 
 for _suite, (_env_id, _layout, _kind) in SUITES.items():
