@@ -1,0 +1,70 @@
+"""Benchmark metrics as pure functions (paper section 4.2; SPEC section 5).
+
+R_t = D_t / tau_o, R_max = max_t R_t; an episode counts for the Deformation-aware Success Rate
+when the task succeeded and R_max <= 1. TSR = mean(T), DSR = mean(T * [R_max <= 1]).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import numpy as np
+
+
+def deformation_ratio(deformation: float, tau_o: float) -> float:
+    if not tau_o > 0:
+        raise ValueError(f"tolerance tau_o must be positive, got {tau_o}")
+    return float(deformation) / float(tau_o)
+
+
+def dsr_success(task_success: bool, r_max: float) -> bool:
+    return bool(task_success) and float(r_max) <= 1.0
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """95 % Wilson score interval of a binomial proportion (the default z)."""
+    if n == 0:
+        return (0.0, 1.0)
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must lie in [0, n], got {successes} of {n}")
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def summarize(records: list[dict]) -> dict:
+    """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals.
+
+    ``records`` need ``success`` and ``r_max`` (rigid suites: ``dsr_success`` given explicitly).
+    """
+    n = len(records)
+    t = sum(bool(r["success"]) for r in records)
+    d = sum(bool(r.get("dsr_success", dsr_success(r["success"], r["r_max"]))) for r in records)
+    if d > t:
+        raise AssertionError("DSR exceeds TSR: a deformation-aware success must be a task success")
+    tsr, dsr = (t / n, d / n) if n else (0.0, 0.0)
+    return {
+        "episodes": n, "task_successes": t, "dsr_successes": d,
+        "tsr": tsr, "tsr_ci95": wilson_interval(t, n), "dsr": dsr, "dsr_ci95": wilson_interval(d, n),
+        "gap": tsr - dsr, "gap_share_of_successes": (t - d) / t if t else 0.0,
+        "r_max_median": float(np.median([r["r_max"] for r in records])) if n else float("nan"),
+    }
+
+
+def group_summaries(records: list[dict], keys: tuple[str, ...]) -> dict:
+    """:func:`summarize` per value of ``keys`` (e.g. ("suite",), ("suite", "task_id"), ("condition",))."""
+    groups = defaultdict(list)
+    for r in records:
+        groups[tuple(r[k] for k in keys)].append(r)
+    return {k: summarize(v) for k, v in sorted(groups.items(), key=lambda kv: tuple(map(str, kv[0])))}
+
+
+def rescore_record(record: dict, tau_new: float) -> dict:
+    """The record scored against another tolerance, from its stored D_t trace (no rollout)."""
+    r_max = max(record["deformation_trace"], default=0.0) / tau_new
+    out = dict(record, tau_o=tau_new, r_max=r_max)
+    out["dsr_success"] = record["success"] if record.get("rigid") else dsr_success(record["success"], r_max)
+    return out

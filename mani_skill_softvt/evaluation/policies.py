@@ -1,0 +1,122 @@
+"""The policy interface of the evaluation and the built-in policies.
+
+A policy sees observations only: ``reset(instruction, seed)`` then ``act(obs) -> (k, 7)`` action
+chunks, each executed for up to ``replan_steps`` steps before the next call. A *privileged*
+policy (the scripted expert) is additionally bound to the env and is labelled as such in reports.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from ..tasks import constants as C
+
+
+class Policy:
+    privileged = False
+    name = "policy"
+
+    def bind(self, env) -> None:  # only privileged policies use the env
+        pass
+
+    def reset(self, instruction: str, seed: int) -> None:
+        raise NotImplementedError
+
+    def act(self, obs) -> np.ndarray:
+        raise NotImplementedError
+
+
+class ScriptedExpertPolicy(Policy):
+    """The scripted pick-and-place expert, closure drawn from the calibrated envelope (privileged)."""
+
+    privileged = True
+    name = "scripted_expert"
+
+    def __init__(self, chunk: int = 8):
+        self.chunk = chunk
+
+    def bind(self, env) -> None:
+        self.env = env
+
+    def reset(self, instruction: str, seed: int) -> None:
+        from ..calibration.cards import load_calibration
+        from ..expert.pick_place import draw_closure, expert_actions, plan_pick_place
+
+        card = load_calibration(self.env.unwrapped.task.soft_asset_id)
+        self.closure = draw_closure(card, seed)
+        self._actions = iter(a for _, a in expert_actions(self.env, plan_pick_place(self.env, self.closure)))
+
+    def act(self, obs) -> np.ndarray:
+        out = [a for _, a in zip(range(self.chunk), self._actions)]
+        if not out:  # plan finished: hold the last action
+            out = [self._last]
+        self._last = out[-1]
+        return np.stack(out)
+
+
+def _tcp_action(obs, closure: float) -> np.ndarray:
+    """An action holding the TCP pose read from the observation (state_dict / rgb modes)."""
+    if not isinstance(obs, dict) or "extra" not in obs:
+        raise ValueError("this policy reads obs['extra']['tcp_pose']: use obs_mode state_dict, rgb or rgb+tactile")
+    pose = np.asarray(obs["extra"]["tcp_pose"]).reshape(-1)[:7].astype(np.float64)
+    w, x, y, z = pose[3:7]
+    angle = 2 * np.arccos(np.clip(abs(w), -1, 1))
+    axis = np.array([x, y, z]) * np.sign(w if w != 0 else 1.0)
+    n = np.linalg.norm(axis)
+    rotvec = axis / n * angle if n > 1e-9 else np.zeros(3)
+    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], rotvec, [closure]]).astype(np.float32)
+
+
+class HoldPolicy(Policy):
+    """Baseline: keep the initial TCP pose, gripper open (never succeeds, never squeezes)."""
+
+    name = "hold"
+
+    def reset(self, instruction: str, seed: int) -> None:
+        self._action = None
+
+    def act(self, obs) -> np.ndarray:
+        if self._action is None:
+            self._action = _tcp_action(obs, 0.0)
+        return self._action[None]
+
+
+class RandomPolicy(Policy):
+    """Baseline: random TCP targets within 5 cm of the start and random closures (seeded)."""
+
+    name = "random"
+
+    def reset(self, instruction: str, seed: int) -> None:
+        self.rng = np.random.default_rng([seed, 11])
+        self._home = None
+
+    def act(self, obs) -> np.ndarray:
+        if self._home is None:
+            self._home = _tcp_action(obs, 0.0)
+        a = self._home.copy()
+        a[:3] += self.rng.uniform(-0.05, 0.05, 3)
+        a[6] = self.rng.uniform(0.0, 1.0)
+        return a[None]
+
+
+BUILTIN = {"expert": ScriptedExpertPolicy, "hold": HoldPolicy, "random": RandomPolicy}
+
+
+def load_policy(spec: str) -> Policy:
+    """A built-in policy name or ``module:Class`` of a user policy (constructed without arguments)."""
+    if spec in BUILTIN:
+        return BUILTIN[spec]()
+    if ":" not in spec:
+        raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}) nor of the form module:Class")
+    module, cls = spec.split(":", 1)
+    try:
+        obj = getattr(importlib.import_module(module), cls)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"cannot load policy '{spec}': {e}") from e
+    policy = obj()
+    for method in ("reset", "act"):
+        if not callable(getattr(policy, method, None)):
+            raise ValueError(f"policy '{spec}' has no {method}() method")
+    return policy

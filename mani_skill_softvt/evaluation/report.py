@@ -1,0 +1,107 @@
+"""Reports of an evaluation: markdown and JSON tables, R_t traces, OOD per-factor curves."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_write, atomic_write_json
+from ..tasks.suites import OOD_CONDITIONS
+from .metrics import group_summaries, summarize
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f}"
+
+
+def _row(label: str, s: dict) -> str:
+    lo_t, hi_t = s["tsr_ci95"]
+    lo_d, hi_d = s["dsr_ci95"]
+    return (f"| {label} | {s['episodes']} | {_pct(s['tsr'])} [{_pct(lo_t)}, {_pct(hi_t)}] | "
+            f"{_pct(s['dsr'])} [{_pct(lo_d)}, {_pct(hi_d)}] | {_pct(s['gap'])} | {_pct(s['gap_share_of_successes'])} | "
+            f"{s['r_max_median']:.3f} |")
+
+
+HEADER = ("| group | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR | share of successes % | median R_max |\n"
+          "|---|---|---|---|---|---|---|")
+
+
+def build_report(records: list[dict]) -> tuple[str, dict]:
+    """Markdown text and a JSON-able dict: overall, per suite, per task, per OOD condition."""
+    data = {"overall": summarize(records),
+            "per_suite": {k[0]: v for k, v in group_summaries(records, ("suite",)).items()},
+            "per_task": {f"{k[0]}/{k[1]}": v for k, v in group_summaries(records, ("suite", "task_id")).items()},
+            "per_condition": {f"{k[0]}/{k[1]}": v for k, v in group_summaries(records, ("suite", "condition")).items()}}
+    lines = ["## Overall", HEADER, _row("all", data["overall"]), "", "## Per suite", HEADER]
+    lines += [_row(k, v) for k, v in data["per_suite"].items()]
+    lines += ["", "## Per task", HEADER] + [_row(k, v) for k, v in data["per_task"].items()]
+    if len(data["per_condition"]) > len(data["per_suite"]):
+        lines += ["", "## Per condition", HEADER] + [_row(k, v) for k, v in data["per_condition"].items()]
+    return "\n".join(lines) + "\n", data
+
+
+def write_report(records: list[dict], out_dir: Path, stem: str) -> tuple[Path, Path]:
+    text, data = build_report(records)
+    md, js = Path(out_dir) / f"{stem}.md", Path(out_dir) / f"{stem}.json"
+    atomic_write(md, lambda p: p.write_text(text))
+    atomic_write_json(js, data)
+    return md, js
+
+
+def plot_traces(records: list[dict], out: Path) -> None:
+    """R_t traces: successes within tolerance, successes beyond it, failures, coloured apart."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for r in records:
+        t = np.arange(len(r["deformation_trace"])) / 20.0
+        rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
+        color = "tab:green" if r["dsr_success"] else ("tab:red" if r["success"] else "0.6")
+        ax.plot(t, rt, color=color, lw=0.8, alpha=0.8)
+    ax.axhline(1.0, color="k", ls="--", lw=1)
+    ax.plot([], [], color="tab:green", label="success, R_max <= 1")
+    ax.plot([], [], color="tab:red", label="success beyond tolerance")
+    ax.plot([], [], color="0.6", label="failure")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("R_t = D_t / tau_o")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    atomic_write(out, lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+
+
+def plot_ood_curves(records: list[dict], id_records: list[dict], out: Path) -> None:
+    """TSR and DSR against each OOD factor's value, with the ID point at the nominal value."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    factors = {}
+    for name, (key, value) in OOD_CONDITIONS.items():
+        factors.setdefault(key, []).append((value, name))
+    nominal = {"light_intensity": 135.0, "mass_scale": 1.0, "youngs_modulus_scale": 1.0}
+    fig, axes = plt.subplots(1, len(factors), figsize=(4 * len(factors), 3.2), squeeze=False)
+    for ax, (key, pts) in zip(axes[0], factors.items()):
+        xs, tsr, dsr = [], [], []
+        for value, name in sorted(pts + [(nominal[key], "id")]):
+            sel = id_records if name == "id" else [r for r in records if r["condition"] == name]
+            if not sel:
+                continue
+            s = summarize(sel)
+            xs.append(value)
+            tsr.append(100 * s["tsr"])
+            dsr.append(100 * s["dsr"])
+        ax.plot(xs, tsr, "o-", label="TSR")
+        ax.plot(xs, dsr, "s--", label="DSR")
+        ax.set_xlabel(key)
+        ax.set_ylabel("%")
+        ax.set_ylim(-5, 105)
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    atomic_write(out, lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)

@@ -1,0 +1,53 @@
+"""DSRWrapper: adds the deformation-aware scoring to every step's info (never to obs)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from ..calibration.cards import load_calibration
+from .metrics import deformation_ratio, dsr_success
+
+
+class DSRWrapper(gym.Wrapper):
+    """Wraps a SoftVT suite env. Per step ``info`` gains:
+
+    - ``deformation_ratio``: R_t = D_t / tau_o of the instructed object,
+    - ``r_max``: max R_t so far this episode,
+    - ``task_success``: the env's kinematic success,
+    - ``dsr_success``: task success with R_max <= 1 (rigid suites: equal to task success, the
+      paper's construction; their R_t is still reported).
+
+    tau_o comes from the calibration card of the task's soft asset (rigid twins: their soft
+    asset's card), loaded at construction.
+    """
+
+    def __init__(self, env: gym.Env, calibration_dir=None):
+        super().__init__(env)
+        task = env.unwrapped.task
+        self.card = load_calibration(task.soft_asset_id, calibration_dir) if calibration_dir else \
+            load_calibration(task.soft_asset_id)
+        self.tau_o = float(self.card["tau_o"])
+        self.rigid = task.asset_id.startswith("rigid_")
+        self.r_max = 0.0
+        self.deformation_trace: list[float] = []
+
+    def _score(self, info: dict) -> dict:
+        u = self.env.unwrapped
+        d = u.deformation(u.target_instance)
+        r = deformation_ratio(d, self.tau_o)
+        self.r_max = max(self.r_max, r)
+        self.deformation_trace.append(d)
+        success = bool(info["success"][0])
+        info = dict(info)
+        info.update(deformation_ratio=r, r_max=self.r_max, task_success=success,
+                    dsr_success=success if self.rigid else dsr_success(success, self.r_max))
+        return info
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.r_max, self.deformation_trace = 0.0, []
+        return obs, self._score(info)
+
+    def step(self, action):
+        obs, rew, terminated, truncated, info = self.env.step(action)
+        return obs, rew, terminated, truncated, self._score(info)

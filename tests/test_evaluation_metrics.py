@@ -1,0 +1,81 @@
+"""DSR metrics, Wilson intervals, rescoring: hand-computed values."""
+
+import math
+
+import pytest
+
+from mani_skill_softvt.calibration.stats import gripper_envelope, slip_distance
+from mani_skill_softvt.evaluation.metrics import rescore_record, summarize, wilson_interval
+from mani_skill_softvt.evaluation.protocols import episodes, id_seed, train_seed
+
+
+def _rec(success, r_max, trace_scale=1.0):
+    return {"success": success, "r_max": r_max, "tau_o": 0.01, "rigid": False,
+            "deformation_trace": [0.0, 0.01 * r_max * trace_scale]}
+
+
+def test_hand_built_records_give_hand_computed_rates_and_intervals():
+    recs = [_rec(True, 0.5), _rec(True, 1.2), _rec(True, 0.9), _rec(False, 0.3), _rec(False, 2.0)]
+    s = summarize(recs)
+    assert s["tsr"] == pytest.approx(3 / 5) and s["dsr"] == pytest.approx(2 / 5)
+    assert s["gap"] == pytest.approx(1 / 5) and s["gap_share_of_successes"] == pytest.approx(1 / 3)
+    # Wilson 95 % for 3/5 by hand: centre (p + z^2/2n)/(1 + z^2/n), half-width z sqrt(p q / n + z^2/4n^2)/(1 + z^2/n).
+    z, n, p = 1.959963984540054, 5, 0.6
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    assert s["tsr_ci95"] == pytest.approx((c - h, c + h))
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_dsr_never_exceeds_tsr():
+    import itertools
+
+    for combo in itertools.product([True, False], [0.2, 1.0, 1.5], repeat=2):
+        recs = [_rec(combo[0], combo[1]), _rec(combo[2], combo[3])]
+        s = summarize(recs)
+        assert s["dsr"] <= s["tsr"]
+
+
+def test_rescoring_at_the_original_tolerance_reproduces_the_dsr():
+    recs = [_rec(True, 0.5), _rec(True, 1.2), _rec(False, 0.3)]
+    same = [rescore_record(r, r["tau_o"]) for r in recs]
+    assert summarize(same)["dsr"] == summarize(recs)["dsr"]
+    looser = [rescore_record(r, 2 * r["tau_o"]) for r in recs]
+    assert summarize(looser)["dsr"] == pytest.approx(2 / 3)
+
+
+def test_envelope_from_sweep_records():
+    recs = []
+    for g, held, d in [(0.2, False, 0.001), (0.3, True, 0.002), (0.4, True, 0.004), (0.5, True, 0.006),
+                       (0.6, True, 0.008), (0.7, True, 0.010)]:
+        for k in range(2):
+            recs.append({"closure": g, "held": held, "peak_deformation": d + 1e-4 * k, "aperture_mm": 50 - 20 * g})
+    env = gripper_envelope(recs, 90)
+    assert env["g_min"] == 0.3
+    stable = sorted(r["peak_deformation"] for r in recs if r["held"])
+    assert env["tau_o"] == pytest.approx(float(__import__("numpy").percentile(stable, 90)))
+    assert env["g_max"] == 0.6  # 0.7's peaks (0.0100, 0.0101) exceed tau ~0.01
+    assert env["span_mm"] == pytest.approx(20 * (0.6 - 0.3))
+    with pytest.raises(ValueError, match="no closure held"):
+        gripper_envelope([{"closure": 0.2, "held": False, "peak_deformation": 0.0, "aperture_mm": 40}])
+
+
+def test_slip_is_measured_in_the_hand_frame():
+    import numpy as np
+
+    q_down = np.array([0.0, 1.0, 0.0, 0.0])  # hand pointing down
+    tcp = np.array([[0, 0, 0.1], [0.2, 0.1, 0.3]])
+    carried = tcp + [0.0, 0.0, -0.01]  # moves with the hand: no slip
+    assert slip_distance(carried, tcp, np.stack([q_down, q_down])) == pytest.approx(0.0, abs=1e-12)
+    slid = carried + [[0, 0, 0], [0, 0, -0.004]]
+    assert slip_distance(slid, tcp, np.stack([q_down, q_down])) == pytest.approx(0.004)
+
+
+def test_protocol_seeds_are_disjoint_and_ood_reuses_id_states():
+    assert max(train_seed(9, 99_999), 0) < id_seed(0, 0)
+    ood = episodes("object_soft", "ood", tasks=[2], per_task=3)
+    ids = episodes("object_soft", "id", tasks=[2], per_task=3)
+    assert len(ood) == 9 * 3 and {e["seed"] for e in ood} == {e["seed"] for e in ids}
+    with pytest.raises(ValueError, match="deformable"):
+        episodes("object_rigid", "ood")
