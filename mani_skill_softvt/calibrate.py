@@ -58,7 +58,11 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--percentile", type=float, default=P.PERCENTILE)
     ap.add_argument("--quick", action="store_true", help="one asset, four closures, one repeat (smoke test)")
     ap.add_argument("--out", type=Path, default=CALIBRATION_DIR)
+    ap.add_argument("--table", action="store_true", help="print the cards in --out beside the paper's, then exit")
     args = ap.parse_args(argv)
+    if args.table:
+        print(comparison_table(args.out))
+        return []
 
     assets = args.assets or ([QUICK_ASSET] if args.quick else list(ASSET_IDS))
     unknown = [a for a in assets if a not in ASSET_IDS]
@@ -111,6 +115,23 @@ def main(argv=None) -> list[dict]:
                 pass
         plot_summary(all_cards, Path(args.out) / "plots" / "summary.png")
     return cards
+
+
+def comparison_table(directory: Path = CALIBRATION_DIR) -> str:
+    """Markdown table of the committed cards beside the paper's values."""
+    from .calibration.cards import load_calibration
+
+    lines = ["| asset | g_min | g_max | span mm | tau_o % diag | paper g_min | paper g_max | paper span mm | paper tau_o % |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for a in ASSET_IDS:
+        try:
+            c = load_calibration(a, directory)
+        except FileNotFoundError:
+            continue
+        pg = P.PAPER_CARDS[a]
+        lines.append(f"| {a} | {c['g_min']:.2f} | {c['g_max']:.2f} | {c['span_mm']:.1f} | {100 * c['tau_o']:.2f} | "
+                     f"{pg[0]:.2f} | {pg[1]:.2f} | {pg[2]:.1f} | {pg[3]:.1f} |")
+    return "\n".join(lines)
 
 
 def _row(card: dict) -> str:

@@ -24,3 +24,17 @@ JITTER_XY = 2e-3  # m
 JITTER_YAW = np.deg2rad(5.0)
 
 SEED_BASE = 10_000  # calibration seeds never collide with demo (0..) or evaluation seeds
+
+# The paper's cards (SPEC section 6), for the README comparison: g_min, g_max, span mm, tau_o % diag.
+PAPER_CARDS = {
+    "soft_pastry001": (0.4000, 0.8000, 26.21, 7.6),
+    "soft_pastry002": (0.6547, 0.6900, 2.56, 9.3),
+    "soft_pastry003": (0.4400, 0.8000, 13.26, 8.6),
+    "soft_pastry005": (0.4700, 0.5800, 5.87, 10.7),
+    "soft_pastry010": (0.4200, 0.6600, 24.82, 8.3),
+    "soft_pastry011": (0.4400, 0.5800, 10.63, 7.1),
+    "soft_stw_cube_hq": (0.3200, 0.6200, 19.43, 11.2),
+    "soft_stw_cuboid_hq": (0.3800, 0.4400, 10.95, 9.8),
+    "soft_stw_cylinder_hq": (0.2900, 0.6600, 21.95, 9.8),
+    "soft_stw_sphere_hq": (0.3700, 0.6300, 20.77, 9.7),
+}

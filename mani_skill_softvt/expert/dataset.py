@@ -1,0 +1,171 @@
+"""Expert demonstrations in ManiSkill's trajectory format (.h5 + .json), with quality control.
+
+Each episode is recorded once (physics runs once) into its own small HDF5 file, written
+atomically, so generation resumes per episode; ``merge`` then packs the accepted episodes into
+one ManiSkill trajectory file. Per episode ``traj_<i>`` holds ManiSkill's ``actions``,
+``terminated``, ``truncated``, ``success``, ``fail`` and ``env_states`` (including the FEM state,
+so ``set_state_dict`` replays it exactly), plus ``actions_binary`` (the same actions in the binary
+gripper encoding) and an ``evaluator/`` group (FEM nodes, object centroids, D_t, R_t, grasp,
+contact and drop events) that never enters any observation.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..io import atomic_write, atomic_write_json
+
+SOURCE_DESC = ("mani_skill_softvt scripted expert: Cartesian waypoints through the absolute end-effector pose "
+               "controller, closure drawn from the calibrated envelope [g_min, g_max]")
+
+
+def _flatten_state(state: dict, prefix: str = "") -> dict[str, np.ndarray]:
+    out = {}
+    for k, v in state.items():
+        key = f"{prefix}/{k}" if prefix else k
+        if isinstance(v, dict):
+            out.update(_flatten_state(v, key))
+        else:
+            out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
+    return out
+
+
+def record_episode(env, seed: int, closure: float) -> dict:
+    """Run the expert once on a DSR-wrapped suite env; return every stream as numpy arrays."""
+    from .pick_place import expert_actions, plan_pick_place
+
+    obs, info = env.reset(seed=seed)
+    u = env.unwrapped
+    name = u.target_instance
+    states = [_flatten_state(u.get_state_dict())]
+    ev = {"nodes": [u.soft_nodes(name).astype(np.float32)], "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u._specs])],
+          "deformation": [env.deformation_trace[-1]], "deformation_ratio": [info["deformation_ratio"]]}
+    acts, terms, truncs, succ, fail, grasp, drop, force = [], [], [], [], [], [], [], []
+    for _, action in expert_actions(env, plan_pick_place(env, closure)):
+        obs, _, terminated, truncated, info = env.step(action)
+        acts.append(action)
+        terms.append(bool(terminated[0]))
+        truncs.append(bool(truncated[0]))
+        succ.append(bool(info["success"][0]))
+        fail.append(bool(info["fail"][0]))
+        grasp.append(bool(info["is_grasped"][0]))
+        drop.append(bool(info["dropped"][0]))
+        force.append([np.linalg.norm(u._coupling.wrench(f"panda_{s}finger")[:3]) for s in ("left", "right")])
+        states.append(_flatten_state(u.get_state_dict()))
+        ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
+        ev["centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u._specs]))
+        ev["deformation"].append(env.deformation_trace[-1])
+        ev["deformation_ratio"].append(info["deformation_ratio"])
+        if terms[-1] or truncs[-1]:
+            break
+    actions = np.asarray(acts, np.float32)
+    binary = actions.copy()
+    binary[:, 6] = (actions[:, 6] > 0.0).astype(np.float32)  # any commanded closure = "close"
+    return {
+        "seed": int(seed), "closure": float(closure), "instruction": u.instruction, "target_instance": name,
+        "actions": actions, "actions_binary": binary, "terminated": np.asarray(terms), "truncated": np.asarray(truncs),
+        "success": np.asarray(succ), "fail": np.asarray(fail),
+        "env_states": {k: np.stack([s[k] for s in states]) for k in states[0]},
+        "evaluator": {"nodes": np.stack(ev["nodes"]), "object_centroids": np.stack(ev["centroids"]),
+                      "deformation": np.asarray(ev["deformation"]), "deformation_ratio": np.asarray(ev["deformation_ratio"]),
+                      "is_grasped": np.asarray(grasp), "dropped": np.asarray(drop), "pad_force": np.asarray(force),
+                      "tau_o": np.float64(env.tau_o)},
+    }
+
+
+def screen(ep: dict) -> list[str]:
+    """Integrity problems of an episode (empty list: accepted)."""
+    problems = []
+    t = len(ep["actions"])
+    if t == 0:
+        return ["no steps"]
+    for k in ("terminated", "truncated", "success", "fail"):
+        if len(ep[k]) != t:
+            problems.append(f"{k} has {len(ep[k])} steps, actions {t}")
+    for k, v in ep["env_states"].items():
+        if len(v) != t + 1:
+            problems.append(f"env_states/{k} has {len(v)} entries, expected {t + 1}")
+    for k in ("nodes", "deformation", "deformation_ratio"):
+        if len(ep["evaluator"][k]) != t + 1:
+            problems.append(f"evaluator/{k} has {len(ep['evaluator'][k])} entries, expected {t + 1}")
+    arrays = [ep["actions"], *ep["env_states"].values(), ep["evaluator"]["nodes"], ep["evaluator"]["deformation"]]
+    if any(not np.all(np.isfinite(a)) for a in arrays if np.issubdtype(np.asarray(a).dtype, np.floating)):
+        problems.append("NaN or inf in the recorded streams")
+    if not ep["success"][-1]:
+        problems.append("not successful at the last step")
+    if ep["evaluator"]["dropped"].any():
+        problems.append("object dropped")
+    r_max = float(np.max(ep["evaluator"]["deformation_ratio"]))
+    if r_max > 1.0:
+        problems.append(f"R_max {r_max:.3f} > 1")
+    return problems
+
+
+def write_episode(ep: dict, path: Path) -> None:
+    """One episode's HDF5 (atomically)."""
+    def write(tmp: Path):
+        with h5py.File(tmp, "w") as f:
+            _write_traj(f.create_group("traj"), ep)
+    atomic_write(path, write)
+
+
+def _dataset(group, key: str, data) -> None:
+    data = np.asarray(data)
+    # Large per-step arrays (FEM nodes, states) compress well; gzip is lossless and deterministic.
+    opts = {"compression": "gzip", "compression_opts": 4} if data.size > 4096 else {}
+    group.create_dataset(key, data=data, **opts)
+
+
+def _write_traj(g, ep: dict) -> None:
+    for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail"):
+        _dataset(g, k, ep[k])
+    s = g.create_group("env_states")
+    for k, v in ep["env_states"].items():
+        _dataset(s, k, v)
+    e = g.create_group("evaluator")
+    for k, v in ep["evaluator"].items():
+        _dataset(e, k, v)
+    for k in ("seed", "closure", "instruction", "target_instance"):
+        g.attrs[k] = ep[k]
+
+
+def read_episode(path: Path) -> dict:
+    with h5py.File(path, "r") as f:
+        g = f["traj"]
+        ep = {k: g[k][()] for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail")}
+        ep["env_states"] = {}
+        g["env_states"].visititems(lambda k, v: ep["env_states"].__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
+        ep["evaluator"] = {k: g["evaluator"][k][()] for k in g["evaluator"]}
+        ep.update({k: (v.decode() if isinstance(v, bytes) else v) for k, v in g.attrs.items()})
+    return ep
+
+
+def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict, control_mode: str,
+          max_episode_steps: int) -> dict:
+    """Pack episodes into ``out_h5`` + its ManiSkill ``.json`` (source_type motionplanning)."""
+    meta = {"env_info": {"env_id": env_id, "env_kwargs": env_kwargs, "max_episode_steps": max_episode_steps},
+            "source_type": "motionplanning", "source_desc": SOURCE_DESC, "episodes": []}
+
+    def write(tmp: Path):
+        with h5py.File(tmp, "w") as f:
+            for i, path in enumerate(episode_files):
+                ep = read_episode(path)
+                _write_traj(f.create_group(f"traj_{i}"), ep)
+                meta["episodes"].append({
+                    "episode_id": i, "episode_seed": int(ep["seed"]), "reset_kwargs": {"seed": int(ep["seed"])},
+                    "control_mode": control_mode, "elapsed_steps": int(len(ep["actions"])),
+                    "success": bool(ep["success"][-1]), "instruction": ep["instruction"], "closure": float(ep["closure"]),
+                    "r_max": float(np.max(ep["evaluator"]["deformation_ratio"])),
+                })
+    atomic_write(out_h5, write)
+    atomic_write_json(out_h5.with_suffix(".json"), meta)
+    return meta
+
+
+def episode_json_line(ep: dict, problems: list[str]) -> str:
+    return json.dumps({"seed": ep["seed"], "accepted": not problems, "problems": problems,
+                       "steps": int(len(ep["actions"])), "r_max": float(np.max(ep["evaluator"]["deformation_ratio"]))})
