@@ -2,6 +2,7 @@
 
     python -m mani_skill_softvt.demos generate --suite object_soft --tasks 3 --num 2
     python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --workers 2
+    python -m mani_skill_softvt.demos render --suite object_soft --tasks 3 --obs-mode rgb+tactile
     python -m mani_skill_softvt.demos stats --suite object_soft
 
 ``generate`` runs the scripted expert once per episode (training seeds, disjoint from the ID
@@ -152,6 +153,11 @@ def main(argv=None):
     g.add_argument("--num", type=int, default=100, help="demos per task (paper: 100)")
     g.add_argument("--workers", type=int, default=1)
     g.add_argument("--out", type=Path, default=DEMOS_DIR)
+    r = sub.add_parser("render", help="re-render stored demos into observations (e.g. rgb+tactile)")
+    r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
+    r.add_argument("--tasks", nargs="+", default=["all"])
+    r.add_argument("--obs-mode", default="rgb+tactile")
+    r.add_argument("--out", type=Path, default=DEMOS_DIR)
     s = sub.add_parser("stats", help="per-task statistics of generated demos")
     s.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     s.add_argument("--out", type=Path, default=DEMOS_DIR)
@@ -165,6 +171,21 @@ def main(argv=None):
             print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
                   + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
         return report
+    if args.cmd == "render":
+        from tqdm import tqdm
+
+        from .expert.dataset import render_observations
+
+        tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
+        for t in tqdm(tasks, desc=f"render {args.obs_mode}", unit="task"):
+            src = args.out / args.suite / f"task{t}.h5"
+            if not src.exists():
+                print(f"task {t}: no demos at {src}; run generate first")
+                continue
+            n = render_observations(src, src.with_name(f"task{t}_{args.obs_mode.replace('+', '_')}.h5"),
+                                    SUITES[args.suite][0], t, args.obs_mode)
+            print(f"task {t}: rendered {n} episodes")
+        return None
     summary = stats(args.suite, args.out)
     print(json.dumps(summary, indent=2))
     return summary

@@ -76,3 +76,21 @@ def test_stats(dataset):
     s = stats("object_rigid", out)
     assert s["tasks"][0]["accepted"] == 1 and s["r_max_median"] < 1.0
     assert (out / "object_rigid" / "r_max_hist.png").exists()
+
+
+def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
+    from mani_skill_softvt.expert.dataset import render_observations
+
+    out, _ = dataset
+    src = out / "object_rigid" / "task3.h5"
+    dst = tmp_path / "obs.h5"
+    assert render_observations(src, dst, "SoftVTObjectRigid-v1", 3, "state_dict") == 1
+    with h5py.File(src, "r") as f, h5py.File(dst, "r") as g:
+        t = f["traj_0/actions"].shape[0]
+        qpos = g["traj_0/obs/agent/qpos"][()]
+        assert qpos.shape[0] == t + 1  # one observation per stored state, no resampling
+        robot_state = f["traj_0/env_states/articulations/panda_softvt"][()]
+        np.testing.assert_allclose(qpos, robot_state[:, 13:13 + 9], atol=1e-6)
+        names = []
+        g.visit(names.append)
+        assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)

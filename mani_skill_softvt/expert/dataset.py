@@ -169,3 +169,67 @@ def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict
 def episode_json_line(ep: dict, problems: list[str]) -> str:
     return json.dumps({"seed": ep["seed"], "accepted": not problems, "problems": problems,
                        "steps": int(len(ep["actions"])), "r_max": float(np.max(ep["evaluator"]["deformation_ratio"]))})
+
+
+def _state_dict_at(env_states: dict, t: int) -> dict:
+    """Nested env state (ManiSkill's get_state_dict layout, batch of one) at step ``t``."""
+    import torch
+
+    state: dict = {}
+    for key, v in env_states.items():
+        node = state
+        parts = key.split("/")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = torch.from_numpy(np.asarray(v[t])[None])
+    return state
+
+
+def render_observations(trajectory_h5: Path, out_h5: Path, env_id: str, task_id: int, obs_mode: str) -> int:
+    """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
+
+    Every recorded env state (reset + one per step) is restored and observed in order, so the
+    cameras, the tactile images (whose shear tracking follows the episode) and the actions share
+    one timeline with no resampling. Observations go to ``traj_<i>/obs/...`` of ``out_h5``.
+    """
+    import gymnasium as gym
+
+    env = gym.make(env_id, task_id=task_id, obs_mode=obs_mode)
+    u = env.unwrapped
+    n = 0
+
+    def write(tmp: Path):
+        nonlocal n
+        with h5py.File(trajectory_h5, "r") as src, h5py.File(tmp, "w") as dst:
+            for name in sorted(src.keys(), key=lambda k: int(k.split("_")[1])):
+                g = src[name]
+                states = {}
+                g["env_states"].visititems(lambda k, v: states.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
+                env.reset(seed=int(g.attrs["seed"]))
+                frames = []
+                for t in range(len(states["soft"])):
+                    u.set_state_dict(_state_dict_at(states, t))
+                    frames.append(_flat_obs(u.get_obs()))
+                out = dst.create_group(name)
+                out.attrs["instruction"] = g.attrs["instruction"]
+                for k in frames[0]:
+                    _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
+                n += 1
+    try:
+        atomic_write(out_h5, write)
+    finally:
+        env.close()
+    return n
+
+
+def _flat_obs(obs: dict, prefix: str = "") -> dict[str, np.ndarray]:
+    out = {}
+    for k, v in obs.items():
+        key = f"{prefix}/{k}" if prefix else k
+        if isinstance(v, dict):
+            out.update(_flat_obs(v, key))
+        elif isinstance(v, str):
+            continue  # the instruction is stored once per trajectory
+        else:
+            out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
+    return out
