@@ -2,109 +2,143 @@
 
     python benchmarks/bench_tactile.py [--frames 30]
 
-Both renderers get the same height maps (a sphere pressed 0.2-1.2 mm, a flat-faced box pressed
-0.5 mm with a tilt) at 320 x 240; taxim is told the matching pixel size. Prints a table with the
-ratio and the mean absolute pixel difference (0-255) between the two images. taxim's JAX
-backend is optional: pip install -e '.[bench]'.
+Scenes are meshes pressed into one pad (a 10 mm sphere at three depths, a tilted 8 x 6 mm box,
+a lying 3 mm cylinder). For each, at 320 x 240:
+
+- ``hm->img+mk``: our height map -> image + markers (optics, marker field, dots);
+- ``full``: our whole per-finger frame from world triangles and the pad pose (transform,
+  rasterise, optics, shear/twist tracking, markers, dots);
+- ``taxim jax``: taxim's JAX backend (``TaximJax.render``, no shadows) on the same height map,
+  if jax is importable (optional: pip install 'mani-skill-softvt[bench]');
+- ``MAD img``: mean absolute difference (0-255, over pixels and channels) between our image
+  (no markers) and taxim's; ``MAD chg``: the same between what contact *changes* in each image
+  (each minus its own no-contact frame), which factors out the two backgrounds: we add the
+  colour change to the raw Mini frame, taxim to its smoothed frame plus its gel-dome shading;
+  ``MAD chg@contact``: the latter over the pixels that either renderer changes visibly
+  (|change| summed over RGB > 6), so the untouched rest of the image does not dilute it.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from typing import Callable
 
 import numpy as np
 import trimesh
 
-from mani_skill_softvt.tactile import TactileSensor
+from mani_skill_softvt.tactile import TactileSensor, finger_pad_frame
 from mani_skill_softvt.tactile import constants as C
-from mani_skill_softvt.tactile.geometry import pixel_centers
-from mani_skill_softvt.tactile.markers import marker_displacements
-from mani_skill_softvt.tactile.optics import render_image
+from mani_skill_softvt.tactile.geometry import heightmap_from_triangles
+from mani_skill_softvt.tactile.markers import draw_markers, marker_displacements
+from mani_skill_softvt.tactile.optics import calibration_folder, render_image
+
+JAX_MISSING = "jax not installed — pip install 'mani-skill-softvt[bench]'"
 
 
-def height_maps() -> dict[str, np.ndarray]:
-    """Object surface height above the gel (m) per pixel; negative = pressed into the gel."""
-    xs, ys = pixel_centers()
-    X, Y = np.meshgrid(xs, ys)
-    maps = {}
+def scenes() -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Name -> (vertices in the pad frame (m), faces): meshes pressed into the gel (z < 0)."""
+    out = {}
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.01)
     for d in (0.2e-3, 0.6e-3, 1.2e-3):
-        r2 = X**2 + Y**2
-        R = 0.01
-        h = np.where(r2 < R * R, (R - d) - np.sqrt(np.maximum(R * R - r2, 0.0)), 5e-3)
-        maps[f"sphere R10 d{d * 1e3:.1f}mm"] = h
-    inside = (np.abs(X) < 4e-3) & (np.abs(Y) < 3e-3)
-    maps["box 8x6 d0.5mm tilted"] = np.where(inside, -0.5e-3 + 0.05 * X, 5e-3)
-    return maps
+        out[f"sphere R10 d{d * 1e3:.1f}mm ({len(sphere.faces)} tris)"] = (
+            np.asarray(sphere.vertices) + [0.5e-3, -0.3e-3, 0.01 - d], np.asarray(sphere.faces))
+    box = trimesh.creation.box(extents=(8e-3, 6e-3, 4e-3))
+    box = box.subdivide().subdivide()  # finer triangles: the rasteriser sees a realistic count
+    tilt = trimesh.transformations.rotation_matrix(np.deg2rad(3.0), [0, 1, 0])
+    box.apply_transform(tilt)
+    v = np.asarray(box.vertices)
+    out[f"box 8x6 tilt3deg d0.5mm ({len(box.faces)} tris)"] = (v + [-2e-3, 1e-3, -v[:, 2].min() - 0.5e-3], np.asarray(box.faces))
+    cyl = trimesh.creation.cylinder(radius=3e-3, height=12e-3, sections=64)
+    cyl.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))  # axis along pad x
+    v = np.asarray(cyl.vertices)
+    out[f"cylinder R3 side d0.4mm ({len(cyl.faces)} tris)"] = (v + [0, 0, -v[:, 2].min() - 0.4e-3], np.asarray(cyl.faces))
+    return out
 
 
-def time_it(fn, frames: int) -> float:
-    fn()
+def time_ms(fn: Callable[[int], object], frames: int) -> tuple[float, object]:
+    """Mean wall time (ms) of fn(i) over ``frames`` calls after two warm-up calls (JIT, caches)."""
+    fn(0)
+    fn(1)
     t = time.perf_counter()
-    for _ in range(frames):
-        out = fn()
+    for i in range(frames):
+        out = fn(i)
     return 1e3 * (time.perf_counter() - t) / frames, out
 
 
-def main(argv=None):
+def make_taxim():
+    """taxim's JAX renderer on the CPU at its own GelSight Mini calibration, or None without jax.
+
+    taxim's pixmm stays at the calibration's 0.0295 mm/px: taxim rescales slopes itself when
+    given a height map smaller than 640 x 480 (its gradient is multiplied by shape / 480)."""
+    try:
+        import jax
+        from taxim.taxim_jax import TaximJax
+    except ImportError:
+        return None
+    return TaximJax(calib_folder=calibration_folder(), device=jax.devices("cpu")[0])
+
+
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=30)
     args = ap.parse_args(argv)
 
     sensor = TactileSensor("left")
-    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.01)
-    try:
-        import jax
-
-        from taxim.taxim_jax import TaximJax
-        from importlib import resources
-
-        folder = resources.files("taxim") / "calib" / "gelsight_mini"
-        taxim = TaximJax(calib_folder=folder, params={"sensor": {"pixmm": C.PIXEL_SIZE * 1e3}},
-                         device=jax.devices("cpu")[0])
-    except ImportError:
-        taxim = None
+    bg = sensor.calib.background.astype(np.float64)
+    taxim = make_taxim()
+    taxim_bg = None
+    if taxim is not None:
+        # taxim's height map: mm from the gel's top, negative = pressed in; zeros = no contact.
+        taxim_bg = 255.0 * np.asarray(taxim.render(np.zeros((C.IMAGE_HEIGHT, C.IMAGE_WIDTH), np.float32), with_shadow=False))
+    # A pad somewhere in the world, tilted, so the full path includes the frame transform.
+    pose = finger_pad_frame("left", np.array([0.4, -0.1, 0.3]), np.array([0.0, 0.6, 0.8]), np.array([1.0, 0.0, 0.0]))
 
     rows = []
-    if taxim is not None:
-        # taxim's frame without contact: its processed background plus the flat-gel response.
-        taxim_bg = np.asarray(taxim.render(np.full((C.IMAGE_HEIGHT, C.IMAGE_WIDTH), 5.0, np.float32), with_shadow=False))
-        bg_mad = float(np.abs(255 * taxim_bg - sensor.calib.background).mean())
-    for name, h in height_maps().items():
-        pen = np.clip(-h, 0.0, C.MAX_PENETRATION)
-        mask = pen > 0
+    for name, (v_pad, faces) in scenes().items():
+        pen = heightmap_from_triangles(v_pad, faces)
 
-        def ours():
-            img = render_image(pen)
-            marker_displacements(sensor.marker_initial, pen / C.PIXEL_SIZE, mask)
+        def ours(_i: int) -> np.ndarray:
+            img = render_image(pen, sensor.calib)
+            xy = marker_displacements(sensor.marker_initial, pen, (1.5, -0.5), 0.01)
+            draw_markers(img, xy)
             return img
-        ms_ours, img_ours = time_it(ours, args.frames)
-        if taxim is not None:
-            hm = (1e3 * np.maximum(h, -C.MAX_PENETRATION)).astype(np.float32)
-            ms_taxim, img_taxim = time_it(lambda: np.asarray(taxim.render(hm, with_shadow=False)), args.frames)
-            # Compare what contact changes: each image minus its own no-contact frame.
-            change_taxim = 255 * (img_taxim - taxim_bg)
-            change_ours = img_ours.astype(np.float64) - sensor.calib.background
-            mad = float(np.abs(change_ours - change_taxim).mean())
-            rows.append((name, ms_ours, ms_taxim, ms_taxim / ms_ours, mad))
-        else:
-            rows.append((name, ms_ours, None, None, None))
-    # The full per-finger path: mesh rasterisation + optics + markers.
-    v = np.asarray(sphere.vertices) + [0.0, 0.0, 0.01 - 0.6e-3]
-    ms_full, _ = time_it(lambda: sensor.render_local(v, sphere.faces), args.frames)
 
-    print(f"\nTactile rendering, {C.IMAGE_WIDTH}x{C.IMAGE_HEIGHT}, {args.frames} frames each (ms per finger per frame)\n")
-    print("| height map | ours (optics+markers) | taxim JAX (no shadow) | taxim/ours | mean abs diff of the contact change |")
-    print("|---|---|---|---|---|")
-    for name, a, b, r, mad in rows:
-        if b is None:
-            print(f"| {name} | {a:.2f} | jax not installed: pip install -e '.[bench]' | - | - |")
+        ms_ours, img_ours = time_ms(ours, args.frames)
+        # Full frame: the mesh jitters by 20 um so shear tracking runs on every frame.
+        worlds = [(v_pad + [dx, 0.0, 0.0]) @ pose[:3, :3].T + pose[:3, 3] for dx in (0.0, 20e-6)]
+        sensor.reset()
+        ms_full, _ = time_ms(lambda i: sensor.render(worlds[i % 2], faces, pose), args.frames)
+        row = {"name": name, "ours": ms_ours, "full": ms_full, "tris": len(faces)}
+        if taxim is not None:
+            hm = (-1e3 * pen).astype(np.float32)
+            ms_taxim, img_taxim = time_ms(lambda _i: np.asarray(taxim.render(hm, with_shadow=False)), args.frames)
+            img_taxim = 255.0 * img_taxim
+            chg_ours, chg_taxim = img_ours - bg, img_taxim - taxim_bg
+            region = (np.abs(chg_ours).sum(axis=2) > 6) | (np.abs(chg_taxim).sum(axis=2) > 6)
+            row.update(taxim=ms_taxim,
+                       mad_img=float(np.abs(img_ours - img_taxim).mean()),
+                       mad_chg=float(np.abs(chg_ours - chg_taxim).mean()),
+                       mad_contact=float(np.abs(chg_ours - chg_taxim)[region].mean()))
+        rows.append(row)
+
+    print(f"\nTactile rendering at {C.IMAGE_WIDTH}x{C.IMAGE_HEIGHT}, {args.frames} frames each, "
+          "ms per finger per frame (CPU)\n")
+    print("| scene | ours hm->img+mk | ours full (tris->frame) | taxim jax (no shadow) | taxim / ours "
+          "| MAD img | MAD chg | MAD chg@contact |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        if "taxim" in r:
+            print(f"| {r['name']} | {r['ours']:.2f} | {r['full']:.2f} | {r['taxim']:.2f} | "
+                  f"{r['taxim'] / r['ours']:.1f}x | {r['mad_img']:.2f} | {r['mad_chg']:.2f} | {r['mad_contact']:.2f} |")
         else:
-            print(f"| {name} | {a:.2f} | {b:.2f} | {r:.1f}x | {mad:.2f} |")
-    if taxim is not None:
-        print(f"\nbackgrounds: ours (raw Mini frame) vs taxim's (processed, with the flat-gel response): "
-              f"mean abs diff {bg_mad:.2f} (0-255)")
-    print(f"\nfull sensor frame from a 5120-triangle sphere mesh (rasterise + optics + markers + dots): {ms_full:.2f} ms")
+            print(f"| {r['name']} | {r['ours']:.2f} | {r['full']:.2f} | - | - | - | - | - |")
+    if taxim is None:
+        print(f"| taxim jax | {JAX_MISSING} | | | | | | |")
+    else:
+        print(f"\nno-contact frames: ours (raw Mini frame) vs taxim's (smoothed frame + gel-dome shading): "
+              f"MAD {float(np.abs(bg - taxim_bg).mean()):.2f}")
+    print("MAD: mean absolute difference, 0-255 per channel; 'chg': of each image minus its own no-contact frame")
 
 
 if __name__ == "__main__":

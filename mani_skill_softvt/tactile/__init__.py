@@ -1,3 +1,25 @@
-"""GelSight Mini tactile sensing: Taxim-style optics, FOTS-style markers (pure NumPy/OpenCV)."""
+"""GelSight Mini tactile sensing: Taxim-style optics, FOTS-style markers (pure NumPy/OpenCV).
 
-from .sensor import TactileFrame, TactileSensor, pad_frame  # noqa: F401
+``TactileSensor(side).render(vertices_world, faces, pad_pose_world) -> TactileFrame``; the pad
+frame and mirroring conventions are in :mod:`.sensor` and :mod:`.geometry`, the sensor
+constants in :mod:`.constants`.
+"""
+
+from . import constants  # noqa: F401
+from .constants import (  # noqa: F401
+    FOV_HEIGHT,
+    FOV_WIDTH,
+    GEL_THICKNESS,
+    IMAGE_HEIGHT,
+    IMAGE_WIDTH,
+    MARKER_COLS,
+    MARKER_ROWS,
+    PIXEL_SIZE,
+)
+from .sensor import TactileFrame, TactileSensor, finger_pad_frame, pad_frame  # noqa: F401
+
+__all__ = [
+    "TactileSensor", "TactileFrame", "pad_frame", "finger_pad_frame", "constants",
+    "IMAGE_WIDTH", "IMAGE_HEIGHT", "PIXEL_SIZE", "FOV_WIDTH", "FOV_HEIGHT", "GEL_THICKNESS",
+    "MARKER_COLS", "MARKER_ROWS",
+]

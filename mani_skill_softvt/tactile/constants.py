@@ -1,38 +1,79 @@
-"""GelSight Mini sensor constants (SI units unless noted; pixels for image quantities)."""
+"""GelSight Mini sensor constants (SI units unless noted; image quantities in output pixels).
 
-# Output image: 320 x 240 (W x H), half the Mini's 640 x 480 calibration resolution.
+The photometric calibration (colour polynomial table, background frame) comes from the
+installed ``taxim`` package's GelSight Mini folder; the numbers here describe the sensor's
+geometry, the gel model and the marker model around it.
+"""
+
+from __future__ import annotations
+
+# ---------------------------------------------------------------- image / optics geometry
+# Output image 320 x 240 (W x H): half of the Mini's 640 x 480 calibration resolution, small
+# enough for a policy observation and an exact 2x downsample of taxim's calibration frame.
 IMAGE_WIDTH = 320
 IMAGE_HEIGHT = 240
-CALIB_WIDTH = 640  # resolution of the taxim calibration data (polynomial coordinates, background)
+# Resolution and pixel pitch of taxim's GelSight Mini calibration (params.json): the colour
+# polynomial is evaluated in these pixel coordinates.
+CALIB_WIDTH = 640
 CALIB_HEIGHT = 480
-# taxim's GelSight Mini calibration: 0.0295 mm per pixel at 640 x 480, so 0.059 mm at 320 x 240:
-# a field of view of 18.9 x 14.2 mm (the Mini's datasheet says about 18.6 x 14.3 mm).
-PIXEL_SIZE = 2 * 0.0295e-3  # m per output pixel
+CALIB_PIXEL_SIZE = 0.0295e-3  # m per calibration pixel
+# Square output pixels: the calibration pitch x 2 = 0.059 mm. Field of view = pixel size x
+# resolution = 18.88 x 14.16 mm, i.e. the Mini's datasheet ~18.6 x 14.3 mm within 2 %; we keep the
+# calibrated square pitch rather than the datasheet's rounded numbers (which would give
+# non-square pixels and slopes the colour table was not fitted for).
+PIXEL_SIZE = CALIB_PIXEL_SIZE * CALIB_WIDTH / IMAGE_WIDTH
+FOV_WIDTH = IMAGE_WIDTH * PIXEL_SIZE  # m, along image columns (pad x)
+FOV_HEIGHT = IMAGE_HEIGHT * PIXEL_SIZE  # m, along image rows (pad y)
 
-# Elastomer: the object's penetration is clamped to what the gel can take.
-GEL_THICKNESS = 2.0e-3  # m; a Mini's gel is ~2-3 mm thick
-MAX_PENETRATION = 1.5e-3  # m; beyond this the gel bottoms out on its acrylic backing
-CONTACT_THRESHOLD = 1e-5  # m of penetration that counts as contact (sub-pixel noise floor)
+# ---------------------------------------------------------------- elastomer
+# The Mini's gel is ~2 mm thick: an object can push its surface in by at most that much before
+# reaching the rigid acrylic backing, so penetration is clamped to [0, GEL_THICKNESS].
+GEL_THICKNESS = 2.0e-3  # m
+MAX_PENETRATION = GEL_THICKNESS  # m; the clamp (alias kept for callers of the older name)
+# 10 um of penetration counts as contact: below the gel's visible response and above
+# floating-point noise of a mesh resting on the gel plane.
+CONTACT_THRESHOLD = 1e-5  # m
+# Surfaces more than this far *behind* the gel plane are on the far side of the finger (an
+# object wrapping around it), not pressing the gel: the rasteriser ignores them.
+BEHIND_PAD_CULL = 10e-3  # m
 
-# Gel smoothing: the membrane spreads an indentation over ~0.3-1 mm around the contact
-# (Taxim's pyramid of Gaussians); sigmas in output pixels, coarse to fine.
-GEL_PYRAMID_SIGMAS = (8.0, 4.0, 2.0)
-GEL_FINAL_SIGMA = 1.0
+# Gel spreading (Taxim): the membrane conforms to the object where it is pressed hardest and
+# relaxes smoothly around it. Taxim's GelSight Mini params.json gives Gaussian pyramid sigmas
+# relative to the image width (deform_pyramid_sigma_rel); times 320 px they are:
+GEL_PYRAMID_SIGMAS = (15.25, 7.75, 4.0, 1.75, 1.0, 0.55)  # px, coarse to fine
+GEL_FINAL_SIGMA = 1.0  # px; taxim's deform_final_sigma_rel x 320: the gel's fine blur
+# Only pixels pressed deeper than this fraction of the maximum penetration are pinned to the
+# object during the pyramid (taxim's contact_scale): the contact rim is left to relax, which
+# gives the soft edge of real GelSight contacts.
+GEL_CONTACT_SCALE = 0.4
+# Blur kernels are truncated at this many sigmas (weights beyond are < 1 %), and blurs with a
+# sigma above GEL_COARSE_SIGMA run on a downsampled image (~10x cheaper; the rendered image
+# matches exact blurs within one grey level on > 99.8 % of pixels).
+GEL_KERNEL_SIGMAS = 3.0
+GEL_COARSE_SIGMA = 3.0  # px
 
-# Lookup table of the photometric model (taxim's polycalib): bins over gradient magnitude
-# [0, pi/2] and direction [-pi, pi].
+# Colour lookup (taxim polycalib.npz): 125 x 125 bins over the surface slope angle [0, pi/2]
+# and the gradient direction [-pi, pi], each bin an RGB quadratic in the pixel coordinates.
 NUM_BINS = 125
 
-# Markers: uniform 11 x 9 grid (columns x rows) with a margin of half a spacing.
+# ---------------------------------------------------------------- markers
+# Uniform 11 x 9 grid (columns x rows) with half-spacing margins, like the Mini's printed dots.
 MARKER_COLS = 11
 MARKER_ROWS = 9
-MARKER_RADIUS = 3.0  # px at 320 x 240 (the Mini's printed dots are ~0.35 mm)
-MARKER_COLOR = (30, 30, 30)
-# FOTS-style marker motion: dilation gain on the smoothed depth slope, and the reach of shear
-# and twist outside the contact patch (exponential decay length).
-DILATION_GAIN = 6.0  # px of marker motion per unit slope of the (pixel-unit) smoothed depth
-DILATION_SIGMA = 6.0  # px: smoothing of the depth before taking its slope
-SHEAR_DECAY = 12.0  # px
+MARKER_RADIUS = 3.0  # px at 320 x 240: the printed dots are ~0.35 mm across (~6 px)
+MARKER_COLOR = (30, 30, 30)  # RGB: dots read nearly black through the gel
+MARKER_DRAW_SHIFT = 4  # cv2 fixed-point bits: dots drawn at 1/16 px so sub-pixel motion shows
+# FOTS-style dilation: a marker moves by gain x sigma^2 x (-grad) of the indentation blurred by
+# a Gaussian of DILATION_SIGMA, which equals FOTS's sum over contact pixels of
+# h_i (m - c_i) exp(-|m - c_i|^2 / 2 sigma^2) (pushed away from each pressed pixel in
+# proportion to its indentation, Gaussian decay). With this gain a 10 mm sphere pressed 1 mm
+# moves the markers near its rim by up to ~2.3 px (0.13 mm), 0.5 mm by ~1.4 px: a visible
+# sub-millimetre bulge, small next to the shear a grasped object drags.
+DILATION_SIGMA = 6.0  # px (~0.35 mm): reach of the gel's lateral bulge around a press
+DILATION_GAIN = 6.0  # px of motion per unit slope of the blurred (px-unit) indentation
+# Shear and twist are carried fully under the contact and decay as exp(-distance / decay)
+# outside it: the gel is bonded to the acrylic, so it drags only a margin around the patch.
+SHEAR_DECAY = 12.0  # px (~0.7 mm)
 
 # Sensor rate (the control rate: one frame per control step).
 FRAME_RATE = 20

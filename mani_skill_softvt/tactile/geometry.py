@@ -1,9 +1,19 @@
-"""Contact geometry as pure functions: from object triangles to a gel penetration map.
+"""Contact geometry as pure functions: object triangles in the pad frame -> gel penetration map.
 
-Pad frame convention: origin at the centre of the gel surface, +z the gel's outward normal
-(towards the object), x along image columns, y along image rows. The object presses into the
-gel where its surface lies below z = 0; the penetration map holds max(0, -z) per pixel,
-clamped to what the gel can take.
+Pad frame (the convention every function here uses):
+
+- origin at the centre of the gel surface; the undeformed gel surface is the plane z = 0;
+- +z is the gel's outward normal, pointing from the sensor towards the object (the sensor's
+  camera sits behind the gel and looks along +z);
+- x runs along image columns (left to right), y along image rows (top to bottom), so the pad
+  frame is also the camera frame of the image (x right, y down, z forward).
+
+An object that merely touches the gel lies in z >= 0. Where its surface lies at z < 0 it has
+pushed the gel in: the **penetration** at a pixel is ``max(0, -z_surface)`` of the object
+surface closest to the camera (lowest z) along that pixel's ray, clamped to
+``[0, GEL_THICKNESS]``. Pixel (col, row) looks along the ray through
+``x = (col + 0.5 - W / 2) * pixel``, ``y = (row + 0.5 - H / 2) * pixel`` (orthographic: the gel
+is ~2 mm thick, so the camera's perspective over the indentation is negligible).
 """
 
 from __future__ import annotations
@@ -12,9 +22,16 @@ import numpy as np
 
 from . import constants as C
 
+# Barycentric slack so pixel centres exactly on a shared edge are painted by both triangles
+# (no cracks between neighbours); the z-buffer keeps the deeper one.
+_EDGE_EPS = 1e-9
+# Projected (doubled) triangle areas below this (m^2) are edge-on to the camera: nothing to paint.
+_MIN_DET = 1e-24
 
-def pixel_centers(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT, pixel: float = C.PIXEL_SIZE):
-    """Pad-frame x (per column) and y (per row) of pixel centres (m)."""
+
+def pixel_centers(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT,
+                  pixel: float = C.PIXEL_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """Pad-frame x of each column's and y of each row's pixel centre (m)."""
     xs = (np.arange(width) + 0.5 - width / 2) * pixel
     ys = (np.arange(height) + 0.5 - height / 2) * pixel
     return xs, ys
@@ -22,91 +39,144 @@ def pixel_centers(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT, pixe
 
 def to_pixels(xy: np.ndarray, width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT,
               pixel: float = C.PIXEL_SIZE) -> np.ndarray:
-    """Pad-frame xy (m) -> continuous pixel coordinates (col, row)."""
+    """Pad-frame xy (m), shape (..., 2) -> continuous pixel coordinates (col, row)."""
     xy = np.asarray(xy, np.float64)
     return np.stack([xy[..., 0] / pixel + width / 2 - 0.5, xy[..., 1] / pixel + height / 2 - 0.5], axis=-1)
 
 
-def penetration_map(vertices: np.ndarray, faces: np.ndarray, width: int = C.IMAGE_WIDTH,
-                    height: int = C.IMAGE_HEIGHT, pixel: float = C.PIXEL_SIZE,
-                    max_penetration: float = C.MAX_PENETRATION) -> np.ndarray:
-    """Per-pixel penetration depth (m) of a triangle mesh given in the pad frame.
-
-    Each triangle with a vertex below the gel surface is rasterised over the pixel centres in
-    its bounding box; a pixel keeps its deepest (lowest z) surface point.
-    """
-    v = np.asarray(vertices, np.float64)
+def validate_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "vertices") -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) finite float64 vertices and (F, 3) int64 faces indexing them, or a ValueError saying
+    what is wrong."""
+    v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
     if v.ndim != 2 or v.shape[1] != 3:
-        raise ValueError(f"vertices must have shape (N, 3), got {v.shape}")
-    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= len(v))):
-        raise ValueError(f"faces must be (F, 3) indices into {len(v)} vertices, got shape {f.shape}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError("vertices contain NaN or inf")
-    depth = np.zeros((height, width))
+        raise ValueError(f"{name} must have shape (N, 3), got shape {v.shape}")
     if f.size == 0:
+        return v, np.zeros((0, 3), np.int64)
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"faces must have shape (F, 3), got shape {f.shape}")
+    if not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"faces must be integer vertex indices, got dtype {f.dtype}")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"faces index vertices {f.min()}..{f.max()} but there are only {len(v)} {name}")
+    if not np.all(np.isfinite(v)):
+        bad = int((~np.isfinite(v)).any(axis=1).sum())
+        raise ValueError(f"{name} contain NaN or inf ({bad} of {len(v)} rows)")
+    return v, f.astype(np.int64, copy=False)
+
+
+def heightmap_from_triangles(vertices: np.ndarray, faces: np.ndarray, width: int = C.IMAGE_WIDTH,
+                             height: int = C.IMAGE_HEIGHT, pixel: float = C.PIXEL_SIZE,
+                             max_penetration: float = C.GEL_THICKNESS) -> np.ndarray:
+    """Penetration depth map (H, W) in metres of a triangle mesh given in the pad frame.
+
+    Z-buffer rasterisation at pixel centres: each triangle that reaches below the gel plane is
+    evaluated (barycentric interpolation of z) at the pixel centres inside its bounding box; a
+    pixel keeps its lowest surface point. Result: ``clip(-z_min, 0, max_penetration)``.
+    """
+    v, f = validate_mesh(vertices, faces)
+    depth = np.zeros((height, width))
+    if len(f) == 0:
         return depth
-    tri = v[f]  # (F, 3, 3)
+    tri = v[f]  # (F, 3 corners, xyz)
+    # Per-triangle bounds (corner-wise min/max: much faster than a reduction over a length-3 axis).
+    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
+    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
     half_w, half_h = width / 2 * pixel, height / 2 * pixel
-    cand = (tri[:, :, 2].min(axis=1) < 0.0) & (tri[:, :, 0].max(axis=1) >= -half_w) & (tri[:, :, 0].min(axis=1) <= half_w) \
-        & (tri[:, :, 1].max(axis=1) >= -half_h) & (tri[:, :, 1].min(axis=1) <= half_h)
-    t = tri[cand]
-    if len(t):
-        _raster_triangles(t, depth, pixel, width, height)
-    return np.minimum(depth, max_penetration)
+    # Candidates: reach below the gel plane, are not behind the finger, overlap the field of view.
+    cand = (lo[:, 2] < 0.0) & (hi[:, 2] > -C.BEHIND_PAD_CULL) & (hi[:, 0] >= -half_w) & (lo[:, 0] <= half_w) \
+        & (hi[:, 1] >= -half_h) & (lo[:, 1] <= half_h)
+    if cand.any():
+        _zbuffer(tri[cand], lo[cand], hi[cand], depth, pixel)
+    return np.minimum(depth, max_penetration, out=depth)
 
 
-def _raster_triangles(t: np.ndarray, depth: np.ndarray, pixel: float, width: int, height: int) -> None:
-    """z-buffer (deepest wins) of triangles over the pixel centres in their bounding boxes, vectorised
-    over all (triangle, pixel) pairs."""
-    x, y, z = t[:, :, 0], t[:, :, 1], t[:, :, 2]
-    det = (y[:, 1] - y[:, 2]) * (x[:, 0] - x[:, 2]) + (x[:, 2] - x[:, 1]) * (y[:, 0] - y[:, 2])
-    ok = np.abs(det) > 1e-18  # edge-on triangles have no area to paint
-    x, y, z, det = x[ok], y[ok], z[ok], det[ok]
-    c_lo = np.clip(np.floor(x.min(1) / pixel + width / 2 - 0.5), 0, width - 1).astype(np.int64)
-    c_hi = np.clip(np.ceil(x.max(1) / pixel + width / 2 - 0.5), 0, width - 1).astype(np.int64)
-    r_lo = np.clip(np.floor(y.min(1) / pixel + height / 2 - 0.5), 0, height - 1).astype(np.int64)
-    r_hi = np.clip(np.ceil(y.max(1) / pixel + height / 2 - 0.5), 0, height - 1).astype(np.int64)
-    nc, nr = c_hi - c_lo + 1, r_hi - r_lo + 1
-    counts = nc * nr
-    tri = np.repeat(np.arange(len(counts)), counts)
-    k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    col = c_lo[tri] + k % nc[tri]
-    row = r_lo[tri] + k // nc[tri]
-    X = (col + 0.5 - width / 2) * pixel
-    Y = (row + 0.5 - height / 2) * pixel
-    x0, x1, x2 = x[tri, 0], x[tri, 1], x[tri, 2]
-    y0, y1, y2 = y[tri, 0], y[tri, 1], y[tri, 2]
-    a = ((y1 - y2) * (X - x2) + (x2 - x1) * (Y - y2)) / det[tri]
-    b = ((y2 - y0) * (X - x2) + (x0 - x2) * (Y - y2)) / det[tri]
-    c = 1.0 - a - b
-    inside = (a >= -1e-9) & (b >= -1e-9) & (c >= -1e-9)
-    pen = -(a * z[tri, 0] + b * z[tri, 1] + c * z[tri, 2])
-    keep = inside & (pen > 0)
-    np.maximum.at(depth, (row[keep], col[keep]), pen[keep])
+# The older name, kept for callers.
+penetration_map = heightmap_from_triangles
 
 
-def contact_mask(depth: np.ndarray, threshold: float = C.CONTACT_THRESHOLD) -> np.ndarray:
-    return depth > threshold
+def _zbuffer(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray, depth: np.ndarray, pixel: float) -> None:
+    """Write max(-z) of the triangles (T, 3, 3) (with their xyz bounds lo, hi (T, 3)) into
+    ``depth`` at the pixel centres they cover, vectorised over all (triangle, pixel-in-bounding-box)
+    pairs. Barycentric coordinates and the penetration are affine in (col, row), so each triangle
+    is reduced to 9 coefficients and each pair costs one gather and a few multiply-adds."""
+    height, width = depth.shape
+    off_u, off_w = width / 2 - 0.5, height / 2 - 0.5  # pixel centres sit at integer (col, row)
+    u = tri[:, :, 0] / pixel + off_u
+    w = tri[:, :, 1] / pixel + off_w
+    z = tri[:, :, 2]
+    u0, u1, u2, w0, w1, w2 = u[:, 0], u[:, 1], u[:, 2], w[:, 0], w[:, 1], w[:, 2]
+    det = (w1 - w2) * (u0 - u2) + (u2 - u1) * (w0 - w2)
+    ok = np.abs(det) > _MIN_DET / (pixel * pixel)
+    if not ok.all():
+        u0, u1, u2, w0, w1, w2, z, det, lo, hi = (a[ok] for a in (u0, u1, u2, w0, w1, w2, z, det, lo, hi))
+    # a(col, row) = a_u col + a_w row + a_0 (and b likewise); c = 1 - a - b.
+    a_u, a_w = (w1 - w2) / det, (u2 - u1) / det
+    b_u, b_w = (w2 - w0) / det, (u0 - u2) / det
+    a_0 = -(a_u * u2 + a_w * w2)
+    b_0 = -(b_u * u2 + b_w * w2)
+    # Penetration -z = -(a z0 + b z1 + c z2) = -(z2 + a (z0 - z2) + b (z1 - z2)).
+    dz0, dz1 = z[:, 0] - z[:, 2], z[:, 1] - z[:, 2]
+    p_u = -(a_u * dz0 + b_u * dz1)
+    p_w = -(a_w * dz0 + b_w * dz1)
+    p_0 = -(z[:, 2] + a_0 * dz0 + b_0 * dz1)
+    coef = np.stack([a_u, a_w, a_0, b_u, b_w, b_0, p_u, p_w, p_0], axis=1)
+    # Pixel centres inside each bounding box (none for sub-pixel triangles between centres).
+    c_lo = np.maximum(np.ceil(lo[:, 0] / pixel + off_u - _EDGE_EPS), 0).astype(np.int64)
+    c_hi = np.minimum(np.floor(hi[:, 0] / pixel + off_u + _EDGE_EPS), width - 1).astype(np.int64)
+    r_lo = np.maximum(np.ceil(lo[:, 1] / pixel + off_w - _EDGE_EPS), 0).astype(np.int64)
+    r_hi = np.minimum(np.floor(hi[:, 1] / pixel + off_w + _EDGE_EPS), height - 1).astype(np.int64)
+    nc = np.maximum(c_hi - c_lo + 1, 0)
+    counts = nc * np.maximum(r_hi - r_lo + 1, 0)
+    total = int(counts.sum())
+    if total == 0:
+        return
+    t = np.repeat(np.arange(len(counts)), counts)
+    k = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)  # index within the box
+    ncol = nc[t]
+    col = c_lo[t] + k % ncol
+    row = r_lo[t] + k // ncol
+    cf = np.take(coef, t, axis=0)
+    colf, rowf = col.astype(np.float64), row.astype(np.float64)
+    a = cf[:, 0] * colf + cf[:, 1] * rowf + cf[:, 2]
+    b = cf[:, 3] * colf + cf[:, 4] * rowf + cf[:, 5]
+    pen = cf[:, 6] * colf + cf[:, 7] * rowf + cf[:, 8]
+    keep = (a >= -_EDGE_EPS) & (b >= -_EDGE_EPS) & (a + b <= 1.0 + _EDGE_EPS) & (pen > 0.0)
+    np.maximum.at(depth.reshape(-1), row[keep] * width + col[keep], pen[keep])
 
 
-def contact_area(depth: np.ndarray, pixel: float = C.PIXEL_SIZE, threshold: float = C.CONTACT_THRESHOLD) -> float:
-    """Contact area (m^2)."""
-    return float(contact_mask(depth, threshold).sum() * pixel * pixel)
+def contact_mask(height: np.ndarray, threshold: float = C.CONTACT_THRESHOLD) -> np.ndarray:
+    """Boolean (H, W): pixels where the gel is pushed in by more than ``threshold`` (m)."""
+    return np.asarray(height) > threshold
 
 
-def contact_centroid(depth: np.ndarray, threshold: float = C.CONTACT_THRESHOLD) -> np.ndarray | None:
-    """Centroid (col, row) in pixels of the contact patch, or None without contact."""
-    rows, cols = np.nonzero(contact_mask(depth, threshold))
+def contact_area(height: np.ndarray, pixel: float = C.PIXEL_SIZE, threshold: float = C.CONTACT_THRESHOLD) -> float:
+    """Contact area (m^2): the number of contact pixels times the pixel area."""
+    return float(contact_mask(height, threshold).sum() * pixel * pixel)
+
+
+def contact_centroid(height: np.ndarray, threshold: float = C.CONTACT_THRESHOLD) -> np.ndarray | None:
+    """Centroid (col, row) in pixels of the contact patch (unweighted), or None without contact."""
+    rows, cols = np.nonzero(contact_mask(height, threshold))
     if len(rows) == 0:
         return None
     return np.array([cols.mean(), rows.mean()])
 
 
 def rigid_fit_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
-    """Rotation angle and translation of the 2-D rigid motion src -> dst (Kabsch, least squares)."""
+    """Least-squares 2-D rigid motion src -> dst (Kabsch; (M, 2) point sets, M >= 1).
+
+    Returns (angle, shift): dst ~ R(angle) (src - mean(src)) + mean(src) + shift, i.e. a rotation
+    about the source centroid by ``angle`` (rad, from +x towards +y) and the centroid's
+    displacement. In 2-D the Kabsch SVD reduces to angle = atan2(sum a x b, sum a . b) over the
+    centred point pairs, which is never a reflection.
+    """
     src, dst = np.asarray(src, np.float64), np.asarray(dst, np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 2 or len(src) == 0:
+        raise ValueError(f"rigid_fit_2d needs two (M, 2) point sets of equal shape, got {src.shape} and {dst.shape}")
     cs, cd = src.mean(axis=0), dst.mean(axis=0)
     a, b = src - cs, dst - cd
-    angle = float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
+    cross = float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
+    dot = float((a * b).sum())
+    angle = float(np.arctan2(cross, dot)) if (cross or dot) else 0.0
     return angle, cd - cs

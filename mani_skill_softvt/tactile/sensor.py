@@ -1,10 +1,19 @@
-"""The per-finger GelSight Mini sensor: contact mesh + gel pose in, tactile image + markers out.
+"""The per-finger GelSight Mini sensor: contact mesh + pad pose in, tactile image + markers out.
 
-Frames. The *pad frame* has its origin at the centre of the gel surface and +z along the gel's
-outward normal (towards the grasped object); x runs along image columns, y along image rows.
-Each finger's pad frame is right-handed, so with both x axes chosen along the hand's x the two
-images are mirror images of each other, as the two cameras look at the object from opposite
-sides (the right finger's x points along -x of the hand; see :func:`pad_frame`).
+Pad frame (see :mod:`.geometry`): origin at the centre of the gel surface, +z the gel's outward
+normal pointing towards the grasped object, x along image columns (left to right), y along
+image rows (top to bottom). It is right-handed and is the frame of a camera inside the finger
+looking out through the gel (x right, y down, z forward), so the image shows the contact as
+that camera sees it.
+
+Left/right mirroring. The two fingers' cameras face each other. Both are mounted with the same
+"up" (image y along the same hand direction), so a contact point towards +x of the hand shows
+on the right of the left finger's image and on the left of the right finger's image: the right
+image is the left one flipped horizontally. In frames: with +z of each pad pointing at the
+other finger, the left pad's x is the hand's x and the right pad's x is the hand's -x
+(:func:`finger_pad_frame`, :meth:`TactileSensor.pad_pose`); both then share y = z x x. The
+sensor itself renders whatever pad pose it is given: mirroring lives in the pad frame, so it
+is never applied twice.
 """
 
 from __future__ import annotations
@@ -14,34 +23,76 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import constants as C
-from .geometry import contact_mask, penetration_map, rigid_fit_2d, to_pixels
+from .geometry import contact_mask, heightmap_from_triangles, rigid_fit_2d, to_pixels, validate_mesh
 from .markers import draw_markers, marker_displacements, marker_grid
 from .optics import load_calibration, render_image
+
+SIDES = ("left", "right")
+# Sign of the pad's x axis along the hand's x axis: the right camera is the mirror of the left.
+MIRROR_SIGN = {"left": 1.0, "right": -1.0}
 
 
 @dataclass
 class TactileFrame:
+    """One finger's GelSight frame."""
+
     image: np.ndarray  # (240, 320, 3) uint8 RGB, markers drawn
-    marker_initial: np.ndarray  # (99, 2) float32 (col, row) px
+    marker_initial: np.ndarray  # (99, 2) float32 (col, row) px, rest positions
     marker_current: np.ndarray  # (99, 2) float32 (col, row) px
-    depth: np.ndarray  # (240, 320) penetration (m): sensor-internal, for tests and figures
+    depth: np.ndarray  # (240, 320) float64 penetration (m), clamped to the gel thickness
 
 
 def pad_frame(origin: np.ndarray, normal: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
-    """4x4 world pose of a pad frame: +z along ``normal``, +x along ``x_hint`` made orthogonal."""
-    z = np.asarray(normal, np.float64) / np.linalg.norm(normal)
-    x = np.asarray(x_hint, np.float64) - np.dot(x_hint, z) * z
-    x /= np.linalg.norm(x)
+    """4x4 world pose of a pad frame: origin at ``origin``, +z along ``normal``, +x along ``x_hint``
+    made orthogonal to it, y = z x x (right-handed)."""
+    z = np.asarray(normal, np.float64)
+    xh = np.asarray(x_hint, np.float64)
+    if z.shape != (3,) or xh.shape != (3,) or np.asarray(origin).shape != (3,):
+        raise ValueError("origin, normal and x_hint must be 3-vectors")
+    z = z / np.linalg.norm(z)
+    x = xh - np.dot(xh, z) * z
+    n = np.linalg.norm(x)
+    if not n > 1e-9:
+        raise ValueError("x_hint must not be parallel to the pad normal")
+    x /= n
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, origin
     return m
 
 
+def finger_pad_frame(side: str, origin: np.ndarray, normal: np.ndarray, hand_x: np.ndarray) -> np.ndarray:
+    """Pad pose of the ``side`` finger whose gel centre is ``origin`` and faces along ``normal``:
+    x along ``hand_x`` for the left finger and along ``-hand_x`` for the right one, so the right
+    image is the horizontal mirror of the left (module docstring)."""
+    if side not in SIDES:
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    return pad_frame(origin, normal, MIRROR_SIGN[side] * np.asarray(hand_x, np.float64))
+
+
+def world_to_pad(vertices_world: np.ndarray, pad_pose_world: np.ndarray) -> np.ndarray:
+    """World points (N, 3) expressed in the pad frame whose 4x4 world pose is given."""
+    m = np.asarray(pad_pose_world, np.float64)
+    if m.shape != (4, 4):
+        raise ValueError(f"pad_pose_world must be a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("pad_pose_world contains NaN or inf")
+    rot = m[:3, :3]
+    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise ValueError("pad_pose_world's rotation block must be a proper rotation")
+    return (np.asarray(vertices_world, np.float64) - m[:3, 3]) @ rot
+
+
 class TactileSensor:
-    """One GelSight Mini on one finger. Call :meth:`reset` at episode start, :meth:`render` per frame."""
+    """One GelSight Mini on one finger. Call :meth:`reset` at episode start, :meth:`render` per frame.
+
+    Between renders it remembers the contact onset (which object vertices touched the gel, and
+    where, when contact began) to turn the patch's in-plane motion since then into marker shear
+    and twist; the onset is forgotten when contact is lost, on :meth:`reset`, or when the mesh's
+    vertex count changes.
+    """
 
     def __init__(self, side: str = "left"):
-        if side not in ("left", "right"):
+        if side not in SIDES:
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         self.side = side
         self.calib = load_calibration()
@@ -50,43 +101,49 @@ class TactileSensor:
         self.reset()
 
     def reset(self) -> None:
-        self._onset: tuple[np.ndarray, np.ndarray] | None = None  # (vertex ids, pad xy at onset)
+        """Forget the contact onset (start of an episode)."""
+        self._onset: tuple[int, np.ndarray, np.ndarray] | None = None  # (vertex count, ids, pad xy at onset)
+
+    def pad_pose(self, origin: np.ndarray, normal: np.ndarray, hand_x: np.ndarray) -> np.ndarray:
+        """This finger's pad pose (see :func:`finger_pad_frame`)."""
+        return finger_pad_frame(self.side, origin, normal, hand_x)
 
     def render(self, vertices_world: np.ndarray, faces: np.ndarray, pad_pose_world: np.ndarray) -> TactileFrame:
-        """Frame for the object surface (world vertices, triangles) touching this pad."""
-        m = np.asarray(pad_pose_world, np.float64)
-        if m.shape != (4, 4):
-            raise ValueError(f"pad_pose_world must be a 4x4 matrix, got shape {m.shape}")
-        v = np.asarray(vertices_world, np.float64)
-        if v.ndim != 2 or v.shape[1] != 3:
-            raise ValueError(f"vertices_world must have shape (N, 3), got {v.shape}")
-        local = (v - m[:3, 3]) @ m[:3, :3]
-        return self.render_local(local, faces)
+        """Frame for the object surface (world vertices (N, 3), triangles (F, 3)) seen by the pad
+        whose 4x4 world pose (pad frame -> world) is ``pad_pose_world``."""
+        v, f = validate_mesh(vertices_world, faces, "vertices_world")
+        return self.render_local(world_to_pad(v, pad_pose_world), f)
 
     def render_local(self, vertices_pad: np.ndarray, faces: np.ndarray) -> TactileFrame:
         """Frame for a surface already expressed in the pad frame."""
-        depth = penetration_map(vertices_pad, faces)
-        mask = contact_mask(depth)
-        if not mask.any():
+        v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
+        depth = heightmap_from_triangles(v, f)
+        initial = self.marker_initial.astype(np.float32)
+        if not contact_mask(depth).any():
             self._onset = None
-            return TactileFrame(self.background_frame.copy(), self.marker_initial.astype(np.float32),
-                                self.marker_initial.astype(np.float32), depth)
-        shear_px, twist = self._patch_motion(vertices_pad)
-        current = marker_displacements(self.marker_initial, depth / C.PIXEL_SIZE, mask, shear_px, twist)
+            return TactileFrame(self.background_frame.copy(), initial, initial.copy(), depth)
+        shear_px, twist, centre = self._patch_motion(v, f)
+        current = marker_displacements(self.marker_initial, depth, shear_px, twist, centre=centre)
         image = draw_markers(render_image(depth, self.calib), current)
-        return TactileFrame(image, self.marker_initial.astype(np.float32), current.astype(np.float32), depth)
+        return TactileFrame(image, initial, current.astype(np.float32), depth)
 
-    def _patch_motion(self, vertices_pad: np.ndarray) -> tuple[np.ndarray, float]:
-        """Shear (px) and twist (rad) of the contact patch since onset, from the vertices that
-        were in contact at onset (2-D rigid fit of their in-plane motion)."""
-        in_contact = np.nonzero(vertices_pad[:, 2] < 0.0)[0]
-        if self._onset is None or len(in_contact) == 0:
-            ids = in_contact if len(in_contact) else np.argsort(vertices_pad[:, 2])[:3]
-            self._onset = (ids, vertices_pad[ids, :2].copy())
-            return np.zeros(2), 0.0
-        ids, xy0 = self._onset
-        if len(ids) < 2:
-            shift = vertices_pad[ids, :2].mean(axis=0) - xy0.mean(axis=0)
-            return shift / C.PIXEL_SIZE, 0.0
-        angle, shift = rigid_fit_2d(xy0, vertices_pad[ids, :2])
-        return shift / C.PIXEL_SIZE, angle
+    def _contact_vertices(self, v: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Ids of the vertices of triangles that reach into the gel inside the field of view (the
+        material patch that grips the gel; a triangle's corners cover contacts between vertices)."""
+        tri_z = v[f, 2]
+        hit = (tri_z.min(axis=1) < 0.0) & (tri_z.max(axis=1) > -C.BEHIND_PAD_CULL)
+        ids = np.unique(f[hit])
+        inside = (np.abs(v[ids, 0]) <= C.FOV_WIDTH / 2) & (np.abs(v[ids, 1]) <= C.FOV_HEIGHT / 2)
+        return ids[inside] if inside.any() else ids
+
+    def _patch_motion(self, v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float, np.ndarray | None]:
+        """Shear (px, (col, row)), twist (rad) and rotation centre (px) of the contact patch since
+        onset: a 2-D rigid (Kabsch) fit of the in-plane motion of the vertices that touched at onset."""
+        if self._onset is None or self._onset[0] != len(v):
+            ids = self._contact_vertices(v, f)
+            self._onset = (len(v), ids, v[ids, :2].copy())
+            return np.zeros(2), 0.0, None
+        _, ids, xy0 = self._onset
+        angle, shift = rigid_fit_2d(xy0, v[ids, :2])
+        centre = to_pixels(xy0.mean(axis=0))  # rotation centre: the onset patch's centroid
+        return shift / C.PIXEL_SIZE, angle, centre
