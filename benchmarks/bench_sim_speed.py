@@ -27,16 +27,17 @@ def _time_steps(env, actions) -> float:
 
 def bench_softvt(obs_mode: str, steps: int) -> float:
     import mani_skill_softvt.tasks  # noqa: F401
-    from mani_skill_softvt.expert.grasp_script import GraspPlan, ee_action
+    from mani_skill_softvt.expert.grasp_script import GraspPlan, ee_action, mid_height_grasp
 
     env = gym.make("SoftGraspLift-v1", obs_mode=obs_mode, control_mode="pd_ee_pose",
                    sensor_configs=dict(width=224, height=224))
     env.reset(seed=0)
     u = env.unwrapped
     plan = GraspPlan()
-    xy = u.soft_nodes().mean(axis=0)[:2]
+    nodes = u.soft_nodes()
+    xy = nodes.mean(axis=0)[:2]
     actions, tcp = [], u.agent.tcp.pose.p[0].numpy().astype(np.float64)
-    for phase, target, g in plan.phases(xy)[:5]:
+    for phase, target, g in plan.phases(xy, mid_height_grasp(nodes))[:5]:
         n = plan.steps[phase]
         for i in range(n):
             actions.append(ee_action(tcp + (target - tcp) * min(1.0, (i + 1) / max(1, n - 2)), g))

@@ -347,9 +347,37 @@ class SoftBodyEnv(BaseEnv):
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
-        super().set_state_dict(state, env_idx)
+        super().set_state_dict(self._changed_rigid_state(state), env_idx)
         if "soft" in state:
             self._set_soft_state_vector(np.asarray(common_to_numpy(state["soft"]))[0])
+
+    def _changed_rigid_state(self, state: dict) -> dict:
+        """``state`` without the actors and articulation roots that already hold exactly the stored
+        values. PhysX keeps a body's centre-of-mass pose, so writing back a pose it just returned
+        can move it by one float32 ulp; skipping unchanged bodies (the table, props, the robot's
+        fixed base) makes restore-then-step reproduce a recorded trajectory bit for bit."""
+        live = self.get_state_dict()
+        out = {k: v for k, v in state.items() if k not in ("actors", "articulations")}
+        for group in ("actors", "articulations"):
+            if group not in state:
+                continue
+            out[group] = {}
+            for name, value in state[group].items():
+                value = torch.as_tensor(common_to_numpy(value)).reshape(1, -1)
+                current = live[group].get(name)
+                if current is not None and torch.equal(current.reshape(1, -1).to(value.dtype), value):
+                    continue
+                if group == "articulations" and current is not None and torch.equal(
+                    current.reshape(1, -1)[:, :13].to(value.dtype), value[:, :13]
+                ):
+                    # Fixed base unchanged: restore the joints only.
+                    art = self.scene.state_dict_registry.articulations[name]
+                    qpos, qvel = value[0, 13:].numpy().reshape(2, -1)
+                    art.set_qpos(qpos)
+                    art.set_qvel(qvel)
+                    continue
+                out[group][name] = value
+        return out
 
     def set_state(self, state, env_idx: torch.Tensor = None):
         # ManiSkill rebuilds only actors and articulations from a flat vector: the soft-body
