@@ -14,8 +14,6 @@ Interrupted runs resume: finished trials are kept in ``calibration/.sweeps/<asse
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from .assets.cards import ASSET_IDS
@@ -53,6 +51,9 @@ def main(argv=None) -> list[dict]:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--assets", nargs="+", default=None, help=f"deformable asset ids (default: all ten; quick: {QUICK_ASSET})")
     ap.add_argument("--workers", type=int, default=1, help="assets calibrated in parallel processes")
+    ap.add_argument("--ray", metavar="ADDRESS", default=None,
+                    help="calibrate the assets as Ray tasks instead ('local', 'auto' or ray://host:10001); "
+                         "on several nodes --out must be on a shared filesystem")
     ap.add_argument("--repeats", type=int, default=None, help=f"trials per closure (default {P.REPEATS}; quick {P.QUICK_REPEATS})")
     ap.add_argument("--closures", type=float, nargs="+", default=None, help="closures to sweep (default: 0.10 to 1.0 by 0.05)")
     ap.add_argument("--percentile", type=float, default=P.PERCENTILE)
@@ -78,30 +79,19 @@ def main(argv=None) -> list[dict]:
     from tqdm import tqdm
 
     total = len(assets) * len(closures) * repeats
-    bar = tqdm(total=total, desc="calibration trials", unit="trial")
-    manager = mp.Manager()
-    queue = manager.Queue()
-    cards = []
-    ctx = mp.get_context("spawn")  # Warp and SAPIEN do not survive fork
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as pool:
-        futures = {pool.submit(calibrate_asset, a, closures, repeats, args.percentile, args.out, queue): a for a in assets}
-        pending = set(futures)
-        while pending:
-            while not queue.empty():
-                asset, n, _ = queue.get()
-                bar.update(n)
-                bar.set_postfix_str(asset)
-            finished = {f for f in pending if f.done()}
-            for f in finished:
-                cards.append(f.result())  # re-raises a worker's error with its traceback
-                tqdm.write(_row(cards[-1]))
-            pending -= finished
-            if pending:
-                import time
+    from .parallel import run_tasks
 
-                time.sleep(0.5)
-        while not queue.empty():
-            bar.update(queue.get()[1])
+    bar = tqdm(total=total, desc="calibration trials", unit="trial")
+    cards = []
+    out = Path(args.out).resolve()  # workers (Ray's above all) need not share our working directory
+    items = [(a, closures, repeats, args.percentile, out) for a in assets]
+    for kind, value in run_tasks(calibrate_asset, items, args.workers, args.ray):
+        if kind == "message":  # (asset, trials just done, total)
+            bar.update(value[1])
+            bar.set_postfix_str(value[0])
+        else:  # a worker's error is re-raised by run_tasks with its traceback
+            cards.append(value)
+            tqdm.write(_row(value))
     bar.close()
     if len(assets) > 1 or not args.quick:
         from .calibration.cards import load_calibration

@@ -2,6 +2,7 @@
 
     python -m mani_skill_softvt.demos generate --suite object_soft --tasks 3 --num 2
     python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --workers 2
+    python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --ray auto   # on a Ray cluster
     python -m mani_skill_softvt.demos render --suite object_soft --tasks 3 --obs-mode rgb+tactile
     python -m mani_skill_softvt.demos stats --suite object_soft
 
@@ -16,19 +17,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from .io import append_jsonl, atomic_write_json, read_jsonl
+from .parallel import run_tasks
 from .paths import DEMOS_DIR
 from .tasks.suites import NUM_TASKS, SUITES
 
 
-def _generate_task(suite: str, task_id: int, num: int, out: Path, queue) -> dict:
+def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, queue) -> dict:
     import gymnasium as gym
 
     from . import tasks  # noqa: F401
@@ -49,7 +49,7 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, queue) -> dict
         if env is None:
             env = DSRWrapper(gym.make(SUITES[suite][0], task_id=task_id, obs_mode="none", control_mode="pd_ee_pose"))
         t0 = time.perf_counter()
-        ep = record_episode(env, seed, draw_closure(env.card, seed))
+        ep = record_episode(env, seed, draw_closure(env.card, seed), planner)
         problems = screen(ep)
         if not problems:
             write_episode(ep, task_dir / f"ep_{seed}.h5")
@@ -78,29 +78,35 @@ def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
             "seconds_per_demo": float(np.mean([qc[s]["wall_s"] for s in seeds if s in qc])) if qc else None}
 
 
-def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1) -> dict:
+def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1,
+             ray_address: str | None = None, planner: str | None = None) -> dict:
+    """Record ``num`` expert demos per task, one work item per task (local processes or Ray tasks).
+
+    ``planner`` ("mplib" or "cartesian", default :data:`~mani_skill_softvt.expert.pick_place.DEFAULT_PLANNER`)
+    joins the expert's waypoints; each episode records the planner that produced it.
+
+    With ``ray_address`` the tasks write their episodes on the Ray worker's node, so on a
+    multi-node cluster ``out`` must be on a shared filesystem.
+    """
     from tqdm import tqdm
 
     from .evaluation.protocols import ID_EPISODES_PER_TASK, id_seed, train_seed
+    from .expert.pick_place import DEFAULT_PLANNER
 
+    planner = planner or DEFAULT_PLANNER
     atomic_write_json(out / suite / "manifest.json", {
-        "suite": suite, "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
+        "suite": suite, "expert_planner": planner, "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
         "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
         "note": "training and evaluation seed ranges are disjoint by construction"})
     bar = tqdm(total=len(tasks) * num, desc=f"demos {suite}", unit="demo")
-    queue = mp.Manager().Queue()
     results = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        pending = {pool.submit(_generate_task, suite, t, num, out, queue) for t in tasks}
-        while pending:
-            while not queue.empty():
-                bar.update(queue.get())
-            for f in {f for f in pending if f.done()}:
-                results.append(f.result())
-                pending.discard(f)
-            time.sleep(0.2)
-        while not queue.empty():
-            bar.update(queue.get())
+    out_abs = Path(out).resolve()  # workers (Ray's above all) need not share our working directory
+    for kind, value in run_tasks(_generate_task, [(suite, t, num, out_abs, planner) for t in tasks], workers,
+                                 ray_address):
+        if kind == "message":
+            bar.update(value)
+        else:
+            results.append(value)
     bar.close()
     report = {"suite": suite, "tasks": sorted(results, key=lambda r: r["task_id"])}
     atomic_write_json(out / suite / "qc_report.json", report)
@@ -152,7 +158,11 @@ def main(argv=None):
     g.add_argument("--tasks", nargs="+", default=["all"])
     g.add_argument("--num", type=int, default=100, help="demos per task (paper: 100)")
     g.add_argument("--workers", type=int, default=1)
+    g.add_argument("--ray", metavar="ADDRESS", default=None,
+                   help="run the tasks on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
     g.add_argument("--out", type=Path, default=DEMOS_DIR)
+    g.add_argument("--planner", choices=("mplib", "cartesian"), default=None,
+                   help="how the expert joins its waypoints (default: mplib motion planning)")
     r = sub.add_parser("render", help="re-render stored demos into observations (e.g. rgb+tactile)")
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
@@ -161,12 +171,20 @@ def main(argv=None):
     s = sub.add_parser("stats", help="per-task statistics of generated demos")
     s.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     s.add_argument("--out", type=Path, default=DEMOS_DIR)
+    e = sub.add_parser("export-lerobot", help="export rendered demos to LeRobot's dataset v3.0 layout (parquet + mp4)")
+    e.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
+    e.add_argument("--tasks", nargs="+", default=["all"], help="'all': every task with demos under --out")
+    e.add_argument("--out", type=Path, default=DEMOS_DIR, help="demos directory (generate + render output)")
+    e.add_argument("--lerobot-out", type=Path, required=True, help="new (empty) directory for the LeRobot dataset")
+    e.add_argument("--obs-mode", default="rgb+tactile", help="which rendering to export (as passed to render)")
+    e.add_argument("--no-video", action="store_true", help="omit the image features (no mp4), e.g. for a tiny sample")
     args = ap.parse_args(argv)
     if args.cmd == "generate":
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         if args.num < 1 or args.workers < 1:
             ap.error("--num and --workers must be >= 1")
-        report = generate(args.suite, tasks, args.num, args.out, args.workers)
+        report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
+                          planner=args.planner)
         for r in report["tasks"]:
             print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
                   + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
@@ -186,6 +204,19 @@ def main(argv=None):
                                     SUITES[args.suite][0], t, args.obs_mode)
             print(f"task {t}: rendered {n} episodes")
         return None
+    if args.cmd == "export-lerobot":
+        from .expert.lerobot_export import export_lerobot, sources_for
+
+        tasks = ([t for t in range(NUM_TASKS) if (args.out / args.suite / f"task{t}.h5").exists()]
+                 if args.tasks == ["all"] else [int(t) for t in args.tasks])
+        try:
+            info = export_lerobot(sources_for(args.out, args.suite, tasks, args.obs_mode), args.lerobot_out,
+                                  use_videos=not args.no_video)
+        except (FileNotFoundError, ValueError) as err:
+            ap.error(str(err))
+        print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "
+              f"{info['total_tasks']} tasks (LeRobot {info['codebase_version']}, {info['fps']} fps)")
+        return info
     summary = stats(args.suite, args.out)
     print(json.dumps(summary, indent=2))
     return summary

@@ -3,6 +3,7 @@
     python -m mani_skill_softvt.evaluate                          # small default: expert, 3 tasks, 1 episode each
     python -m mani_skill_softvt.evaluate --suite spatial_soft --protocol ood --policy mypkg.policies:MyPolicy \\
         --obs-mode rgb+tactile --tasks all --episodes-per-task 50 --workers 2
+    python -m mani_skill_softvt.evaluate --tasks all --episodes-per-task 50 --ray ray://head:10001   # on Ray
     python -m mani_skill_softvt.evaluate --rescore outputs/eval/object_soft_id_expert.jsonl --percentile 80
 
 Writes one JSONL record per episode (resumable), a markdown and JSON report, and plots of the
@@ -32,9 +33,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--obs-mode", default="state_dict")
     ap.add_argument("--control-mode", default="pd_ee_pose", choices=["pd_ee_pose", "pd_ee_pose_binary"])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--ray", metavar="ADDRESS", default=None,
+                    help="run the episodes on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
     ap.add_argument("--out", type=Path, default=Path("outputs/eval"))
     ap.add_argument("--rescore", type=Path, default=None, help="records (JSONL) to re-aggregate at --percentile")
     ap.add_argument("--percentile", type=float, default=None)
+    ap.add_argument("--video", type=int, default=0, metavar="N",
+                    help="re-run the first N episodes in rgb+tactile mode and write <out>/videos/*.mp4")
     args = ap.parse_args(argv)
 
     from .evaluation.report import plot_traces, write_report
@@ -46,6 +51,11 @@ def main(argv=None) -> dict:
         ap.error(f"task ids must be in [0, {NUM_TASKS - 1}]")
     if args.episodes_per_task < 1 or args.workers < 1:
         ap.error("--episodes-per-task and --workers must be >= 1")
+    if args.video < 0:
+        ap.error("--video must be >= 0")
+    if args.video and args.obs_mode in ("state", "none") and args.policy != "expert":
+        ap.error(f"--video re-runs episodes with dict observations (rgb+tactile), which a policy evaluated in "
+                 f"obs mode '{args.obs_mode}' does not read; evaluate with state_dict, rgb or rgb+tactile")
     from tqdm import tqdm
 
     from .evaluation.protocols import episodes
@@ -56,7 +66,7 @@ def main(argv=None) -> dict:
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
     records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
-                       progress=bar.update)
+                       progress=bar.update, ray_address=args.ray)
     bar.close()
     md, _ = write_report(records, args.out, stem)
     plot_traces(records, args.out / f"{stem}_traces.png")
@@ -71,6 +81,8 @@ def main(argv=None) -> dict:
     if records and records[0]["receipt"]["privileged"]:
         print("(policy is privileged: it reads the simulator state)")
     print(f"records: {args.out / f'{stem}.jsonl'}  report: {md}")
+    if args.video:
+        _videos(records[:args.video], args.policy, args.control_mode, args.out / "videos", stem)
     return {"records": records}
 
 
@@ -93,6 +105,17 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
     md, _ = write_report(new, out, f"{path.stem}_p{percentile:g}")
     print(md.read_text())
     return {"records": new}
+
+
+def _videos(records: list[dict], policy: str, control_mode: str, out: Path, stem: str) -> None:
+    """Videos of ``records`` (re-run in rgb+tactile mode); existing files are kept, so a re-run resumes."""
+    from .evaluation.videos import record_episode_video, video_name
+
+    for r in records:
+        path = out / video_name(stem, r)
+        if not path.exists():
+            record_episode_video(r, policy, path, control_mode=control_mode)
+        print(f"video: {path}")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,6 @@ import json
 
 import pytest
 
-from mani_skill_softvt.evaluation.protocols import episodes
 from mani_skill_softvt.evaluation.runner import evaluate, record_hash
 from mani_skill_softvt.io import read_jsonl
 
@@ -15,12 +14,11 @@ def _strip(records):
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in records]
 
 
-def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path):
-    eps = episodes("object_rigid", "id", tasks=[3], per_task=2)
-    full = evaluate(eps, "expert", tmp_path / "full.jsonl")
+def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, rigid_cube_expert_run):
+    eps, full, full_path = rigid_cube_expert_run
     # Interrupted run: the first episode landed, the second was being written when killed.
     part = tmp_path / "part.jsonl"
-    first_line = (tmp_path / "full.jsonl").read_text().splitlines()[0]
+    first_line = full_path.read_text().splitlines()[0]
     part.write_text(first_line + "\n" + '{"suite": "object_rigid", "task_id": 3, "cond')
     resumed = evaluate(eps, "expert", part)
     assert _strip(resumed) == _strip(full)

@@ -2,21 +2,21 @@
 
 Records go to a JSONL file, one line per finished episode, written by the main process only;
 a re-run skips the episodes already there, so an interrupted evaluation neither repeats nor
-loses an episode. Episodes run in worker processes (one env per (suite, task) per worker).
+loses an episode. Episodes run in worker processes, or as Ray tasks with ``ray_address``
+(one env per (suite, task) batch either way; see :mod:`mani_skill_softvt.parallel`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing as mp
 import time
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from .. import __version__
 from ..io import append_jsonl, read_jsonl
+from ..parallel import run_tasks
 from .protocols import episode_key
 
 
@@ -25,13 +25,18 @@ def record_hash(record: dict) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
-def run_episode(env, policy, episode: dict, replan_steps: int = 8) -> dict:
-    """One episode of ``policy`` on a DSR-wrapped env; the record with its audit receipt."""
+def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None) -> dict:
+    """One episode of ``policy`` on a DSR-wrapped env; the record with its audit receipt.
+
+    ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
+    """
     from ..calibration.cards import card_hash
 
     u = env.unwrapped
     options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
     obs, info = env.reset(seed=int(episode["seed"]), options=options)
+    if on_step is not None:
+        on_step(obs, info)
     policy.bind(env)
     policy.reset(u.instruction, int(episode["seed"]))
     ev = u.evaluator_state()[u.target_instance]
@@ -46,6 +51,8 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8) -> dict:
         for action in chunk[:replan_steps]:
             obs, _, terminated, truncated, info = env.step(action)
             steps += 1
+            if on_step is not None:
+                on_step(obs, info)
             if bool(terminated[0]) or bool(truncated[0]):
                 done = True
                 break
@@ -79,8 +86,12 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
 
 
 def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1, obs_mode: str = "state_dict",
-             control_mode: str = "pd_ee_pose", progress=None) -> list[dict]:
-    """Run the episodes not yet in ``out`` and return every record of the requested episodes."""
+             control_mode: str = "pd_ee_pose", progress=None, ray_address: str | None = None) -> list[dict]:
+    """Run the episodes not yet in ``out`` and return every record of the requested episodes.
+
+    ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
+    local processes ("local", "auto" or "ray://host:port"); the records are the same.
+    """
     out = Path(out)
     done = {episode_key(r) for r in read_jsonl(out)}
     todo = [ep for ep in episodes if episode_key(ep) not in done]
@@ -89,24 +100,12 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
     batches = defaultdict(list)
     for ep in todo:
         batches[(ep["suite"], ep["task_id"])].append(ep)
-    if batches:
-        manager = mp.Manager()
-        queue = manager.Queue()
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = [pool.submit(_worker, b, policy_spec, obs_mode, control_mode, queue) for b in batches.values()]
-            pending = set(futures)
-            while pending or not queue.empty():
-                while not queue.empty():
-                    rec = queue.get()
-                    append_jsonl(out, rec)
-                    if progress is not None:
-                        progress(1)
-                finished = {f for f in pending if f.done()}
-                for f in finished:
-                    f.result()  # surface a worker's error
-                pending -= finished
-                if pending:
-                    time.sleep(0.2)
+    items = [(b, policy_spec, obs_mode, control_mode) for b in batches.values()]
+    for kind, rec in run_tasks(_worker, items, workers, ray_address):
+        if kind == "message":  # one finished episode: write it at once so a kill loses nothing
+            append_jsonl(out, rec)
+            if progress is not None:
+                progress(1)
     wanted = {episode_key(ep) for ep in episodes}
     records = {episode_key(r): r for r in read_jsonl(out) if episode_key(r) in wanted}
     return [records[episode_key(ep)] for ep in episodes if episode_key(ep) in records]
