@@ -62,13 +62,22 @@ def test_rigid_twin_deformation_is_small_against_the_tolerance():
     import gymnasium as gym
 
     import mani_skill_softvt  # noqa: F401
+    from mani_skill_softvt.assets.materials import RIGID_STIFFNESS_FACTOR
     from mani_skill_softvt.calibration.sweep import run_trial, trial_seed
 
     card = load_calibration("soft_stw_cube_hq")
+    # The soft cube's own trial at the tightest closure (full 10 N squeeze), same seed and pose.
+    seed = trial_seed(ASSET_IDS.index("soft_stw_cube_hq"), 1.0, 0)
+    soft = next(r for r in card["records"] if r["seed"] == seed)
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id="rigid_stw_cube_hq")
-    rec = run_trial(env, 1.0, trial_seed(0, 1.0, 0))  # the tightest closure: full 10 N squeeze
+    rec = run_trial(env, 1.0, seed)
     env.close()
-    print(f"rigid twin peak D {rec['peak_deformation']:.5f} vs tau_o {card['tau_o']:.5f}")
-    assert rec["held"]
-    assert rec["peak_deformation"] < 0.25 * card["tau_o"]
-    assert np.isfinite(rec["peak_deformation"]) and P.REPEATS >= 2
+    print(f"rigid twin peak D {rec['peak_deformation']:.5f} vs soft {soft['peak_deformation']:.5f}, "
+          f"tau_o {card['tau_o']:.5f}")
+    assert rec["held"] and np.isfinite(rec["peak_deformation"])
+    # Same squeeze force, modulus x RIGID_STIFFNESS_FACTOR: linear elasticity scales D by its inverse;
+    # a factor 2 of slack covers the pads' penalty overlap, which does not stiffen with the body.
+    assert rec["peak_deformation"] < 2.0 * soft["peak_deformation"] / RIGID_STIFFNESS_FACTOR
+    # Negligible against the tolerance even beyond the envelope: R_t stays below 1/2.
+    assert rec["peak_deformation"] < 0.5 * card["tau_o"]
+    assert P.REPEATS >= 2

@@ -34,8 +34,14 @@ class ScriptedExpertPolicy(Policy):
     privileged = True
     name = "scripted_expert"
 
-    def __init__(self, chunk: int = 8):
+    def __init__(self, chunk: int = 8, planner: str | None = None):
+        from ..expert.pick_place import DEFAULT_PLANNER, PLANNERS
+
+        planner = planner or DEFAULT_PLANNER
+        if planner not in PLANNERS:
+            raise ValueError(f"unknown expert planner '{planner}'; choose one of {PLANNERS}")
         self.chunk = chunk
+        self.planner = planner
 
     def bind(self, env) -> None:
         self.env = env
@@ -46,7 +52,8 @@ class ScriptedExpertPolicy(Policy):
 
         card = load_calibration(self.env.unwrapped.task.soft_asset_id)
         self.closure = draw_closure(card, seed)
-        self._actions = iter(a for _, a in expert_actions(self.env, plan_pick_place(self.env, self.closure)))
+        plan = plan_pick_place(self.env, self.closure, self.planner)
+        self._actions = iter(a for _, a in expert_actions(self.env, plan))
 
     def act(self, obs) -> np.ndarray:
         out = [a for _, a in zip(range(self.chunk), self._actions)]
@@ -101,7 +108,17 @@ class RandomPolicy(Policy):
         return a[None]
 
 
-BUILTIN = {"expert": ScriptedExpertPolicy, "hold": HoldPolicy, "random": RandomPolicy}
+class CartesianExpertPolicy(ScriptedExpertPolicy):
+    """The scripted expert with straight-line Cartesian moves instead of mplib's planned paths."""
+
+    name = "scripted_expert_cartesian"
+
+    def __init__(self, chunk: int = 8):
+        super().__init__(chunk, planner="cartesian")
+
+
+BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPolicy, "hold": HoldPolicy,
+           "random": RandomPolicy}
 
 
 def load_policy(spec: str) -> Policy:

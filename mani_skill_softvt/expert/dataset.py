@@ -18,9 +18,27 @@ import h5py
 import numpy as np
 
 from ..io import atomic_write, atomic_write_json
+from .pick_place import DEFAULT_PLANNER
 
-SOURCE_DESC = ("mani_skill_softvt scripted expert: Cartesian waypoints through the absolute end-effector pose "
-               "controller, closure drawn from the calibrated envelope [g_min, g_max]")
+_CLOSURE_DESC = "closure drawn from the calibrated envelope [g_min, g_max]"
+SOURCE_DESCS = {
+    "mplib": ("mani_skill_softvt scripted expert: mplib joint-space motion planning (screw, RRTConnect fallback, "
+              "TOPP-RA at 20 Hz) around the table, target prop and other instance, replayed as absolute "
+              f"end-effector poses (forward kinematics), {_CLOSURE_DESC}"),
+    "cartesian": ("mani_skill_softvt scripted expert: Cartesian waypoints through the absolute end-effector pose "
+                  f"controller, {_CLOSURE_DESC}"),
+}
+SOURCE_DESC = SOURCE_DESCS[DEFAULT_PLANNER]
+LEGACY_PLANNER = "cartesian"  # episodes recorded before the planner was stored came from the Cartesian expert
+
+
+def source_desc(planners) -> str:
+    """ManiSkill ``source_desc`` of a trajectory file whose episodes came from ``planners``."""
+    planners = sorted(set(planners))
+    if len(planners) == 1:
+        return SOURCE_DESCS[planners[0]]
+    return "mani_skill_softvt scripted expert, mixed planners: " + "; ".join(
+        f"{p}: {SOURCE_DESCS[p]}" for p in planners)
 
 
 def _flatten_state(state: dict, prefix: str = "") -> dict[str, np.ndarray]:
@@ -34,7 +52,7 @@ def _flatten_state(state: dict, prefix: str = "") -> dict[str, np.ndarray]:
     return out
 
 
-def record_episode(env, seed: int, closure: float) -> dict:
+def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNER) -> dict:
     """Run the expert once on a DSR-wrapped suite env; return every stream as numpy arrays."""
     from .pick_place import expert_actions, plan_pick_place
 
@@ -45,7 +63,8 @@ def record_episode(env, seed: int, closure: float) -> dict:
     ev = {"nodes": [u.soft_nodes(name).astype(np.float32)], "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u._specs])],
           "deformation": [env.deformation_trace[-1]], "deformation_ratio": [info["deformation_ratio"]]}
     acts, terms, truncs, succ, fail, grasp, drop, force = [], [], [], [], [], [], [], []
-    for _, action in expert_actions(env, plan_pick_place(env, closure)):
+    plan = plan_pick_place(env, closure, planner)  # plan.planner: the planner actually used (mplib falls back)
+    for _, action in expert_actions(env, plan):
         obs, _, terminated, truncated, info = env.step(action)
         acts.append(action)
         terms.append(bool(terminated[0]))
@@ -67,6 +86,7 @@ def record_episode(env, seed: int, closure: float) -> dict:
     binary[:, 6] = (actions[:, 6] > 0.0).astype(np.float32)  # any commanded closure = "close"
     return {
         "seed": int(seed), "closure": float(closure), "instruction": u.instruction, "target_instance": name,
+        "planner": plan.planner,
         "actions": actions, "actions_binary": binary, "terminated": np.asarray(terms), "truncated": np.asarray(truncs),
         "success": np.asarray(succ), "fail": np.asarray(fail),
         "env_states": {k: np.stack([s[k] for s in states]) for k in states[0]},
@@ -131,6 +151,7 @@ def _write_traj(g, ep: dict) -> None:
         _dataset(e, k, v)
     for k in ("seed", "closure", "instruction", "target_instance"):
         g.attrs[k] = ep[k]
+    g.attrs["planner"] = ep.get("planner", LEGACY_PLANNER)
 
 
 def read_episode(path: Path) -> dict:
@@ -149,25 +170,29 @@ def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict
     """Pack episodes into ``out_h5`` + its ManiSkill ``.json`` (source_type motionplanning)."""
     meta = {"env_info": {"env_id": env_id, "env_kwargs": env_kwargs, "max_episode_steps": max_episode_steps},
             "source_type": "motionplanning", "source_desc": SOURCE_DESC, "episodes": []}
+    planners = []
 
     def write(tmp: Path):
         with h5py.File(tmp, "w") as f:
             for i, path in enumerate(episode_files):
                 ep = read_episode(path)
+                planners.append(ep.get("planner", LEGACY_PLANNER))
                 _write_traj(f.create_group(f"traj_{i}"), ep)
                 meta["episodes"].append({
                     "episode_id": i, "episode_seed": int(ep["seed"]), "reset_kwargs": {"seed": int(ep["seed"])},
                     "control_mode": control_mode, "elapsed_steps": int(len(ep["actions"])),
                     "success": bool(ep["success"][-1]), "instruction": ep["instruction"], "closure": float(ep["closure"]),
-                    "r_max": float(np.max(ep["evaluator"]["deformation_ratio"])),
+                    "r_max": float(np.max(ep["evaluator"]["deformation_ratio"])), "planner": planners[-1],
                 })
+            meta["source_desc"] = source_desc(planners) if planners else SOURCE_DESC
     atomic_write(out_h5, write)
     atomic_write_json(out_h5.with_suffix(".json"), meta)
     return meta
 
 
 def episode_json_line(ep: dict, problems: list[str]) -> str:
-    return json.dumps({"seed": ep["seed"], "accepted": not problems, "problems": problems,
+    return json.dumps({"seed": ep["seed"], "planner": ep.get("planner", LEGACY_PLANNER), "accepted": not problems,
+                       "problems": problems,
                        "steps": int(len(ep["actions"])), "r_max": float(np.max(ep["evaluator"]["deformation_ratio"]))})
 
 

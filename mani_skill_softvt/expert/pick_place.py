@@ -1,15 +1,21 @@
 """Scripted pick-and-place expert for the four suites (privileged: reads the object's state).
 
-Waypoints in Cartesian space, executed through the absolute end-effector pose controller
-(whose IK plays the role of ManiSkill's motion planner in this free tabletop workspace):
-approach above the instructed object, descend to mid-height, close to the episode's closure,
-lift, transport above the target, lower, release, retreat, and wait for the object to settle.
-The closure is drawn per episode from the object's calibrated envelope [g_min, g_max] (rigid
-twins use their soft asset's card).
+Waypoints: approach above the instructed object, descend to mid-height, close to the episode's
+closure, lift, transport above the target, lower, release, retreat, and wait for the object to
+settle. The closure is drawn per episode from the object's calibrated envelope [g_min, g_max]
+(rigid twins use their soft asset's card). Two planners join the waypoints, both emitting
+``pd_ee_pose`` actions (absolute TCP pose in the robot base frame, closure):
+
+- ``"mplib"``: collision-free joint paths in ManiSkill's motion-planning style (screw motion,
+  TOPP-RA at 20 Hz; RRTConnect is opt-in, being unseeded in mplib 0.1.1) around the table, the basket/plate and the other
+  instance, each joint sample turned into its TCP pose by forward kinematics
+  (:mod:`mani_skill_softvt.expert.planner`);
+- ``"cartesian"``: straight lines between the waypoints, tracked by the controller's IK.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,10 +30,18 @@ CARRY_HEIGHT = 0.16  # m: clears the basket rim (6 cm) with the object hanging b
 RELEASE_CLEARANCE = 0.015  # m between the object's bottom and the target floor at release
 
 
+PLANNERS = ("mplib", "cartesian")
+DEFAULT_PLANNER = "mplib"
+
+
 @dataclass
 class ExpertPlan:
     closure: float
     waypoints: list = field(default_factory=list)  # [(phase, tcp xyz, gripper closure, yaw), ...]
+    planner: str = "cartesian"  # the planner that produced this plan
+    # mplib: [(phase, TCP poses (n, 7) xyz + wxyz in the robot base frame, gripper closure, method), ...]
+    segments: list = field(default_factory=list)
+    fallback_reason: str | None = None  # why an mplib request fell back to the Cartesian plan
 
 
 def object_yaw(rest_vertices: np.ndarray, nodes: np.ndarray) -> float:
@@ -45,8 +59,15 @@ def draw_closure(card: dict | None, seed: int) -> float:
     return float(rng.uniform(card["g_min"], card["g_max"]))
 
 
-def plan_pick_place(env, closure: float) -> ExpertPlan:
-    """Waypoints for the instructed object of a :class:`SoftVTTaskEnv` that was just reset."""
+def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict: bool = False) -> ExpertPlan:
+    """Plan for the instructed object of a :class:`SoftVTTaskEnv` that was just reset.
+
+    When mplib finds no collision-free path for a phase the plan falls back to the Cartesian
+    one (``plan.planner`` says which planner produced it, ``plan.fallback_reason`` why), or,
+    with ``strict``, raises :class:`~mani_skill_softvt.expert.planner.PlanningError`.
+    """
+    if planner not in PLANNERS:
+        raise ValueError(f"unknown expert planner '{planner}'; choose one of {PLANNERS}")
     u = env.unwrapped
     name = u.target_instance
     nodes = u.soft_nodes(name)
@@ -72,7 +93,25 @@ def plan_pick_place(env, closure: float) -> ExpertPlan:
         ("wait", [*drop_xy, CARRY_HEIGHT], 0.0),
     ]
     del height
-    return ExpertPlan(g, [(p, np.asarray(t, np.float64), gg, yaw) for p, t, gg in wp])
+    plan = ExpertPlan(g, [(p, np.asarray(t, np.float64), gg, yaw) for p, t, gg in wp], planner)
+    if planner == "mplib":
+        from .planner import PlanningError, held_object, plan_expert_path
+
+        held = held_object(nodes, [*xy, grasp_z], yaw)
+        try:
+            segments = [(phase, seg.poses, gg, seg.method)
+                        for phase, seg, gg in plan_expert_path(env, plan.waypoints, PHASE_STEPS, held)]
+            steps = sum(len(poses) for _, poses, _, _ in segments)
+            if steps >= C.MAX_EPISODE_STEPS:
+                raise PlanningError(f"the plan takes {steps} control steps, an episode at most {C.MAX_EPISODE_STEPS}")
+        except PlanningError as e:
+            if strict:
+                raise
+            warnings.warn(f"mplib expert plan failed, using the Cartesian plan: {e}", stacklevel=2)
+            plan.planner, plan.fallback_reason = "cartesian", str(e)
+        else:
+            plan.segments = segments
+    return plan
 
 
 def _wrap_half_turn(yaw: float) -> float:
@@ -81,7 +120,21 @@ def _wrap_half_turn(yaw: float) -> float:
 
 
 def expert_actions(env, plan: ExpertPlan):
-    """Yield pd_ee_pose actions along the plan (straight lines, reaching each waypoint 2 steps early)."""
+    """Yield ``(phase, pd_ee_pose action)`` along the plan, reaching each waypoint 2 steps early.
+
+    mplib plans replay their TCP poses; Cartesian plans move in straight lines.
+    """
+    if plan.planner == "mplib":
+        from .planner import quat_to_rotvec
+
+        for phase, poses, g, _ in plan.segments:
+            for pose in poses:
+                # Of the two axis-angles of a near-top-down hand, the one next to the Cartesian
+                # expert's pi * (cos yaw, sin yaw, 0): the action stream stays continuous.
+                ref = ee_action(np.zeros(3), g, _yaw_of(pose[3:]))[3:6]
+                rotvec = quat_to_rotvec(pose[3:], reference=ref)
+                yield phase, np.concatenate([pose[:3], rotvec, [g]]).astype(np.float32)
+        return
     u = env.unwrapped
     tcp = u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
     for phase, target, g, yaw in plan.waypoints:
@@ -93,9 +146,15 @@ def expert_actions(env, plan: ExpertPlan):
         tcp = target
 
 
-def run_expert(env, closure: float, on_step=None) -> dict:
+def _yaw_of(quat) -> float:
+    """Yaw of a near-top-down hand quaternion (wxyz): its x axis projected on the table."""
+    w, x, y, z = quat
+    return float(np.arctan2(2 * (x * y + w * z), 1 - 2 * (y * y + z * z)))
+
+
+def run_expert(env, closure: float, on_step=None, planner: str = DEFAULT_PLANNER) -> dict:
     """Run the expert to the end of its plan or until the episode ends; return a summary."""
-    plan = plan_pick_place(env, closure)
+    plan = plan_pick_place(env, closure, planner)
     info, steps = {}, 0
     for phase, action in expert_actions(env, plan):
         _, _, terminated, truncated, info = env.step(action)
@@ -104,8 +163,8 @@ def run_expert(env, closure: float, on_step=None) -> dict:
             on_step(phase, action, info)
         if bool(terminated[0]) or bool(truncated[0]):
             break
-    return {"steps": steps, "closure": closure, "success": bool(info.get("success", [False])[0]),
-            "dropped": bool(info.get("dropped", [False])[0])}
+    return {"steps": steps, "closure": closure, "planner": plan.planner,
+            "success": bool(info.get("success", [False])[0]), "dropped": bool(info.get("dropped", [False])[0])}
 
 
 TOTAL_STEPS = sum(PHASE_STEPS.values())

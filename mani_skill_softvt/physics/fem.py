@@ -43,6 +43,13 @@ class SimulationInstabilityError(RuntimeError):
     """The FEM simulation left its valid regime (NaN, inverted tets, exploding velocities)."""
 
 
+def vbd_iterations(youngs_moduli) -> int:
+    """VBD iterations per substep for a world holding bodies of these moduli (Pa): stiff bodies
+    (rigid twins) need more to resolve pad friction (see ``constants.VBD_ITERATIONS_STIFF``)."""
+    stiff = any(float(e) >= C.STIFF_MODULUS for e in youngs_moduli)
+    return C.VBD_ITERATIONS_STIFF if stiff else C.VBD_ITERATIONS
+
+
 @dataclass(frozen=True)
 class SoftMaterial:
     """Elastic material of a soft body (SI units)."""
