@@ -53,6 +53,7 @@ class ScriptedExpertPolicy(Policy):
         card = load_calibration(self.env.unwrapped.task.soft_asset_id)
         self.closure = draw_closure(card, seed)
         plan = plan_pick_place(self.env, self.closure, self.planner)
+        self.name = f"scripted_expert[{plan.planner}]"  # the planner that actually ran (receipts)
         self._actions = iter(a for _, a in expert_actions(self.env, plan))
 
     def act(self, obs) -> np.ndarray:
