@@ -64,7 +64,7 @@ def _vectors(table: pa.Table, name: str) -> np.ndarray:
 
 def test_sample_dataset_is_small_and_complete():
     files = [p for p in SAMPLE.rglob("*") if p.is_file()]
-    assert sum(p.stat().st_size for p in files) < 3e6
+    assert sum(p.stat().st_size for p in files) < 4e6  # tiny: two episodes, no rendered frames or video
     for suite in ("object_soft", "object_rigid"):
         meta = json.loads((SAMPLE / suite / "task3.json").read_text())
         assert len(meta["episodes"]) == 1 and meta["episodes"][0]["success"]

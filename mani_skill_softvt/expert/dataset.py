@@ -22,7 +22,7 @@ from .pick_place import DEFAULT_PLANNER
 
 _CLOSURE_DESC = "closure drawn from the calibrated envelope [g_min, g_max]"
 SOURCE_DESCS = {
-    "mplib": ("mani_skill_softvt scripted expert: mplib joint-space motion planning (screw, RRTConnect fallback, "
+    "mplib": ("mani_skill_softvt scripted expert: mplib joint-space motion planning (screw paths, RRTConnect opt-in, "
               "TOPP-RA at 20 Hz) around the table, target prop and other instance, replayed as absolute "
               f"end-effector poses (forward kinematics), {_CLOSURE_DESC}"),
     "cartesian": ("mani_skill_softvt scripted expert: Cartesian waypoints through the absolute end-effector pose "
