@@ -16,31 +16,31 @@ from mani_skill_softvt.expert.dataset import read_episode, screen
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("demos")
-    report = generate("object_rigid", [3], 1, out)
+    report = generate("object_soft", [3], 1, out)
     return out, report
 
 
 def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset):
     out, report = dataset
     assert report["tasks"][0]["accepted"] == 1, report
-    meta = json.loads((out / "object_rigid" / "task3.json").read_text())
-    assert meta["source_type"] == "motionplanning" and meta["env_info"]["env_id"] == "SoftVTObjectRigid-v1"
+    meta = json.loads((out / "object_soft" / "task3.json").read_text())
+    assert meta["source_type"] == "motionplanning" and meta["env_info"]["env_id"] == "SoftVTObjectSoft-v1"
     ep_meta = meta["episodes"][0]
     assert ep_meta["instruction"].startswith("Pick up the soft cream-colored cube")
-    with h5py.File(out / "object_rigid" / "task3.h5", "r") as f:
+    with h5py.File(out / "object_soft" / "task3.h5", "r") as f:
         traj = f["traj_0"]
         t = traj["actions"].shape[0]
         assert traj["actions_binary"].shape == (t, 7) and set(np.unique(traj["actions_binary"][:, 6])) <= {0.0, 1.0}
         assert traj["env_states/soft"].shape[0] == t + 1 and traj["evaluator/nodes"].shape[0] == t + 1
         assert traj["success"][-1] and ep_meta["elapsed_steps"] == t
-    manifest = json.loads((out / "object_rigid" / "manifest.json").read_text())
+    manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
     assert manifest["train_seeds"]["3"][1] < manifest["id_eval_seeds"]["3"][0]
 
 
 def test_stored_states_replay_the_actions_bit_for_bit(dataset):
     out, _ = dataset
-    ep = read_episode(next((out / "object_rigid" / "task3").glob("ep_*.h5")))
-    env = gym.make("SoftVTObjectRigid-v1", task_id=3, obs_mode="none")
+    ep = read_episode(next((out / "object_soft" / "task3").glob("ep_*.h5")))
+    env = gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="none")
     env.reset(seed=int(ep["seed"]))
     u = env.unwrapped
     for t in range(15):
@@ -60,7 +60,7 @@ def test_stored_states_replay_the_actions_bit_for_bit(dataset):
 
 def test_screening_rejects_broken_episodes(dataset):
     out, _ = dataset
-    ep = read_episode(next((out / "object_rigid" / "task3").glob("ep_*.h5")))
+    ep = read_episode(next((out / "object_soft" / "task3").glob("ep_*.h5")))
     assert screen(ep) == []
     bad = dict(ep, evaluator=dict(ep["evaluator"]))
     bad["evaluator"]["deformation_ratio"] = ep["evaluator"]["deformation_ratio"] * 0 + 1.5
@@ -73,18 +73,18 @@ def test_screening_rejects_broken_episodes(dataset):
 
 def test_stats(dataset):
     out, _ = dataset
-    s = stats("object_rigid", out)
+    s = stats("object_soft", out)
     assert s["tasks"][0]["accepted"] == 1 and s["r_max_median"] < 1.0
-    assert (out / "object_rigid" / "r_max_hist.png").exists()
+    assert (out / "object_soft" / "r_max_hist.png").exists()
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
     from mani_skill_softvt.expert.dataset import render_observations
 
     out, _ = dataset
-    src = out / "object_rigid" / "task3.h5"
+    src = out / "object_soft" / "task3.h5"
     dst = tmp_path / "obs.h5"
-    assert render_observations(src, dst, "SoftVTObjectRigid-v1", 3, "state_dict") == 1
+    assert render_observations(src, dst, "SoftVTObjectSoft-v1", 3, "state_dict") == 1
     with h5py.File(src, "r") as f, h5py.File(dst, "r") as g:
         t = f["traj_0/actions"].shape[0]
         qpos = g["traj_0/obs/agent/qpos"][()]

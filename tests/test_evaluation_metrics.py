@@ -79,3 +79,13 @@ def test_protocol_seeds_are_disjoint_and_ood_reuses_id_states():
     assert len(ood) == 9 * 3 and {e["seed"] for e in ood} == {e["seed"] for e in ids}
     with pytest.raises(ValueError, match="deformable"):
         episodes("object_rigid", "ood")
+
+
+def test_rigid_suites_score_dsr_equal_to_tsr():
+    # Rigid twins are scored on task success alone (the paper's construction), even if a stiff
+    # twin's R_max came out above 1, and rescoring at any tolerance keeps it so.
+    recs = [dict(_rec(s, r), rigid=True) for s, r in [(True, 0.1), (True, 1.3), (False, 0.2), (False, 2.0)]]
+    recs = [rescore_record(r, 0.01) for r in recs]
+    s = summarize(recs)
+    assert s["dsr"] == s["tsr"] == 0.5 and s["gap"] == 0.0
+    assert all(rescore_record(r, 1e-4)["dsr_success"] == r["success"] for r in recs)

@@ -72,7 +72,7 @@ def test_missing_ray_says_how_to_install_it(monkeypatch):
     assert "pip install" in RAY_INSTALL_HINT
 
 
-def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_path, rigid_cube_expert_run):
+def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_path, soft_cube_expert_run):
     from mani_skill_softvt.evaluation.runner import evaluate
     from mani_skill_softvt.io import read_jsonl
 
@@ -80,7 +80,7 @@ def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_pat
         return [{k: v for k, v in r.items() if k != "wall_s"} for r in records]
 
     # The local reference is the session's uninterrupted local run (first episode of it).
-    eps, local, _ = rigid_cube_expert_run
+    eps, local, _ = soft_cube_expert_run
     eps, local = eps[:1], local[:1]
     ticks = []
     on_ray = evaluate(eps, "expert", tmp_path / "ray.jsonl", progress=ticks.append, ray_address=local_ray)
