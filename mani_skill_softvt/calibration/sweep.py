@@ -61,11 +61,9 @@ def run_trial(env, closure: float, seed: int, youngs_modulus_scale: float = 1.0)
 
 def _object_yaw(u) -> float:
     """Yaw of the object about z from its settled nodes vs its rest shape (evaluator side)."""
-    x0 = u._x0["object"]
-    rest = u._specs["object"].vertices
-    a = rest[:, :2] - rest[:, :2].mean(axis=0)
-    b = x0[:, :2] - x0[:, :2].mean(axis=0)
-    return float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
+    from ..expert.pick_place import object_yaw
+
+    return object_yaw(u._specs["object"].vertices, u._x0["object"])
 
 
 def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_path: Path, progress=None) -> list[dict]:

@@ -72,7 +72,6 @@ def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict:
     name = u.target_instance
     nodes = u.soft_nodes(name)
     xy = nodes.mean(axis=0)[:2]
-    height = nodes[:, 2].max() - nodes[:, 2].min()
     grasp_z = mid_height_grasp(nodes)
     yaw = _wrap_half_turn(object_yaw(u._specs[name].vertices, nodes))
     lo, hi = (np.asarray(v) for v in u.target_region)
@@ -92,7 +91,6 @@ def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict:
         ("retreat", [*drop_xy, CARRY_HEIGHT], 0.0),
         ("wait", [*drop_xy, CARRY_HEIGHT], 0.0),
     ]
-    del height
     plan = ExpertPlan(g, [(p, np.asarray(t, np.float64), gg, yaw) for p, t, gg in wp], planner)
     if planner == "mplib":
         from .planner import PlanningError, held_object, plan_expert_path

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..physics.transforms import quat_wxyz_to_matrix
 from ..tasks import constants as C
 
 CONTROL_DT = 1.0 / C.CONTROL_FREQ
@@ -68,15 +69,6 @@ class Segment:
 
 
 # ---------------------------------------------------------------- small pose helpers
-def quat_to_matrix(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def quat_angle(q1, q2) -> float:
     """Rotation angle (rad) between two unit quaternions (wxyz)."""
     d = abs(float(np.dot(np.asarray(q1) / np.linalg.norm(q1), np.asarray(q2) / np.linalg.norm(q2))))
@@ -151,7 +143,7 @@ def scene_obstacles(env, exclude=None) -> list[Obstacle]:
     top = -TABLE_TOP_MARGIN
     obstacles = [box_obstacle("table", [-he[0], -he[1], top - 2 * he[2]], [he[0], he[1], top])]
     pose = u.target.pose.raw_pose[0].cpu().numpy().astype(np.float64)
-    rot, p = quat_to_matrix(pose[3:]), pose[:3]
+    rot, p = quat_wxyz_to_matrix(pose[3:]), pose[:3]
     for i, (v, f) in enumerate(load_prop(u.task.target).convex_parts()):
         obstacles.append(Obstacle(f"{u.task.target}_{i:02d}", np.asarray(v) @ rot.T + p, np.asarray(f)))
     for name in u._specs:
@@ -244,12 +236,12 @@ class MotionPlanner:
         return np.asarray(pm.get_link_pose(self.tcp_index), np.float64)
 
     def base_to_world(self, pose) -> np.ndarray:
-        rot = quat_to_matrix(self.base_pose[3:])
+        rot = quat_wxyz_to_matrix(self.base_pose[3:])
         p = rot @ np.asarray(pose[:3]) + self.base_pose[:3]
         return np.concatenate([p, _quat_mul(self.base_pose[3:], pose[3:])])
 
     def world_to_base(self, pose) -> np.ndarray:
-        rot = quat_to_matrix(self.base_pose[3:])
+        rot = quat_wxyz_to_matrix(self.base_pose[3:])
         p = rot.T @ (np.asarray(pose[:3]) - self.base_pose[:3])
         inv = self.base_pose[3:] * np.array([1, -1, -1, -1])
         return np.concatenate([p, _quat_mul(inv, pose[3:])])
@@ -418,7 +410,7 @@ class HeldObject:
 
 def held_object(nodes: np.ndarray, grasp_xyz, yaw: float) -> HeldObject:
     """Box of an object's nodes in the frame of a top-down TCP at ``grasp_xyz`` turned by ``yaw``."""
-    rot = quat_to_matrix(down_quat(yaw))
+    rot = quat_wxyz_to_matrix(down_quat(yaw))
     local = (np.asarray(nodes, np.float64) - np.asarray(grasp_xyz, np.float64)) @ rot  # rows: R^T (x - p)
     lo, hi = local.min(axis=0), local.max(axis=0)
     jaw = float(hi[1] - lo[1])  # the fingers close along the TCP's y axis
