@@ -9,7 +9,7 @@ import pytest
 
 from mani_skill_softvt.assets.tetmesh import box_tetmesh
 from mani_skill_softvt.physics import constants as PC
-from mani_skill_softvt.physics.fem import SimulationInstabilityError, SoftBodyWorld, SoftMaterial
+from mani_skill_softvt.physics.fem import SimulationInstabilityError, SoftBodyWorld, SoftMaterial, vbd_schedule
 
 L = 0.05  # cube edge (m)
 G = 9.81
@@ -86,11 +86,14 @@ def test_settled_object_drifts_less_than_half_a_millimetre_over_two_seconds():
     assert drift < 0.5e-3
 
 
-def _pinch(mu: float, squeeze: float = 1.5e-3):
-    """Squeeze a cube between two vertical pads, pull its support away, watch it for 0.5 s."""
-    mat = SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, friction=mu)
+def _pinch(mu: float, youngs_modulus: float, squeeze: float = 1.5e-3):
+    """Squeeze a cube between two vertical pads, pull its support away, watch it for 0.5 s.
+
+    The world steps with the package's schedule for this modulus (``vbd_schedule``)."""
+    mat = SoftMaterial(youngs_modulus=youngs_modulus, poisson_ratio=0.3, density=300.0, friction=mu)
     v, t = box_tetmesh((L, L, L), 6)
-    w = SoftBodyWorld()
+    substeps, iterations = vbd_schedule([youngs_modulus])
+    w = SoftBodyWorld(substeps=substeps, iterations=iterations)
     w.add_soft_body("cube", v, t, mat, pose=_pose(PC.PARTICLE_RADIUS + 0.5e-3))
     w.add_collider_box("table", (0.1, 0.1, 0.01), local_pose=_pose(-0.01), friction=0.6)
     pad = (0.01, 0.01, 0.01)  # 20 mm pads centred at mid-height
@@ -118,13 +121,16 @@ def _pinch(mu: float, squeeze: float = 1.5e-3):
     return normal, fall, mat.density * L**3 * G
 
 
-def test_friction_holds_above_and_slips_below_the_coulomb_threshold():
-    normal, _, weight = _pinch(mu=1.0)
+# A soft asset's modulus and a rigid twin's (x5): under-converged VBD lets a stiff body slide out
+# of a pinch that holds it 4x over (at 4 substeps x 5 iterations it fell 50 mm, at 4 x 10 7 mm).
+@pytest.mark.parametrize("youngs_modulus", [5e4, 3.5e5], ids=["soft", "stiff_twin"])
+def test_friction_holds_above_and_slips_below_the_coulomb_threshold(youngs_modulus):
+    normal, _, weight = _pinch(1.0, youngs_modulus)
     assert normal > weight  # the squeeze is a real pinch, not a touch
     # Coulomb: the pads hold a weight W when 2 * mu * N > W. Pick mu 4x above and 4x below.
     mu_hold, mu_slip = 4.0 * weight / (2 * normal), 0.25 * weight / (2 * normal)
-    n_hold, fall_hold, _ = _pinch(mu_hold)
-    n_slip, fall_slip, _ = _pinch(mu_slip)
+    n_hold, fall_hold, _ = _pinch(mu_hold, youngs_modulus)
+    n_slip, fall_slip, _ = _pinch(mu_slip, youngs_modulus)
     print(f"pinch N={normal:.2f} N, W={weight:.3f} N: mu={mu_hold:.3f} N={n_hold:.2f} fell {fall_hold*1e3:.2f} mm; "
           f"mu={mu_slip:.4f} N={n_slip:.2f} fell {fall_slip*1e3:.1f} mm")
     # Each run's own measured normal force keeps it clearly on its side of the threshold
@@ -132,6 +138,15 @@ def test_friction_holds_above_and_slips_below_the_coulomb_threshold():
     assert 2 * mu_hold * n_hold > 2.0 * weight and 2 * mu_slip * n_slip < 0.5 * weight
     assert fall_hold < 1e-3  # held: less than 1 mm of creep in 0.4 s
     assert fall_slip > 2e-2  # slipped: fell more than 2 cm
+
+
+def test_stiff_bodies_get_more_substeps_at_the_same_iterations():
+    soft = vbd_schedule([7e4, 1.5e5])
+    stiff = vbd_schedule([7e4, PC.STIFF_MODULUS])
+    assert soft == (PC.NEWTON_SUBSTEPS, PC.VBD_ITERATIONS)
+    assert stiff == (PC.NEWTON_SUBSTEPS_STIFF, PC.VBD_ITERATIONS)
+    # Inertia per node grows with substeps^2: x5 stiffer twins need about sqrt(5) x the substeps.
+    assert (PC.NEWTON_SUBSTEPS_STIFF / PC.NEWTON_SUBSTEPS) ** 2 >= 0.8 * 5
 
 
 def _short_run(world_factory, ticks=60):

@@ -32,8 +32,8 @@ Rigid twins share mesh, texture, density and therefore mass; their modulus is ra
 ``RIGID_STIFFNESS_FACTOR`` (x5, 0.35-0.75 MPa: hard rubber) so the Panda's 10 N grasp deforms them
 several times less than their soft asset (a small fraction of its tolerance; tested). Stiffer twins
 cost more than they give: at x10 the one-tick-late pad coupling starts to ring and VBD needs far
-more iterations to resolve pad friction (the x10 ball and bun slipped out of the grasp even at
-10 iterations; x5 holds at 10, see ``physics.constants.VBD_ITERATIONS_STIFF``).
+more substeps to resolve pad friction (the x10 ball and bun slipped out of the grasp even at
+4 substeps x 10 iterations; x5 holds at 8 x 5, see ``physics.constants.NEWTON_SUBSTEPS_STIFF``).
 """
 
 from __future__ import annotations

@@ -43,11 +43,12 @@ class SimulationInstabilityError(RuntimeError):
     """The FEM simulation left its valid regime (NaN, inverted tets, exploding velocities)."""
 
 
-def vbd_iterations(youngs_moduli) -> int:
-    """VBD iterations per substep for a world holding bodies of these moduli (Pa): stiff bodies
-    (rigid twins) need more to resolve pad friction (see ``constants.VBD_ITERATIONS_STIFF``)."""
+def vbd_schedule(youngs_moduli) -> tuple[int, int]:
+    """(Newton substeps per tick, VBD iterations per substep) for a world holding bodies of these
+    moduli (Pa). Stiff bodies (rigid twins) get more substeps so that pad friction converges
+    (see ``constants.NEWTON_SUBSTEPS_STIFF``)."""
     stiff = any(float(e) >= C.STIFF_MODULUS for e in youngs_moduli)
-    return C.VBD_ITERATIONS_STIFF if stiff else C.VBD_ITERATIONS
+    return (C.NEWTON_SUBSTEPS_STIFF if stiff else C.NEWTON_SUBSTEPS), C.VBD_ITERATIONS
 
 
 @dataclass(frozen=True)

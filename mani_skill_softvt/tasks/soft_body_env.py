@@ -36,7 +36,7 @@ from ..assets.tetmesh import embed_points, surface_of_tets
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.deformation import deformation
-from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_iterations
+from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_schedule
 from . import constants as C
 from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
 
@@ -161,7 +161,8 @@ class SoftBodyEnv(BaseEnv):
 
     def _build_soft_world(self):
         self._set_finger_inertia()
-        world = SoftBodyWorld(iterations=vbd_iterations(s.material.youngs_modulus for s in self._specs.values()))
+        substeps, iterations = vbd_schedule(s.material.youngs_modulus for s in self._specs.values())
+        world = SoftBodyWorld(substeps=substeps, iterations=iterations)
         for spec in self._specs.values():
             world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
         bodies = []
