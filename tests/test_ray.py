@@ -72,6 +72,7 @@ def test_missing_ray_says_how_to_install_it(monkeypatch):
     assert "pip install" in RAY_INSTALL_HINT
 
 
+@pytest.mark.slow  # a full expert episode on a Ray worker (~40 s)
 def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_path, soft_cube_expert_run):
     from mani_skill_softvt.evaluation.runner import evaluate
     from mani_skill_softvt.io import read_jsonl
