@@ -114,19 +114,38 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
 
 
 def stats(suite: str, out: Path) -> dict:
-    """Per task: accepted demos, R_max median and 95th percentile, episode lengths; histogram PNG."""
+    """Per task: expert success (accepted / generated), R_max median and 95th percentile, episode
+    lengths, wall seconds per demo, rejection reasons. Writes ``stats.json`` and ``r_max_hist.png``
+    next to the suite's demos; raises FileNotFoundError when there are none."""
     rows, all_r = [], []
     for t in range(NUM_TASKS):
-        meta_path = out / suite / f"task{t}.json"
-        if not meta_path.exists():
-            continue
-        eps = json.loads(meta_path.read_text())["episodes"]
         qc = read_jsonl(out / suite / f"task{t}" / "qc.jsonl")
+        if not qc:
+            continue
+        # From the QC log, so an interrupted run (episodes recorded, not yet merged) counts too.
+        eps = [q for q in qc if q["accepted"]]
         r = [e["r_max"] for e in eps]
         all_r += r
-        rows.append({"task_id": t, "generated": len(qc), "accepted": len(eps), "success_rate": len(eps) / max(1, len(qc)),
-                     "r_max_median": float(np.median(r)), "r_max_p95": float(np.percentile(r, 95)),
-                     "r_max_above_1": int(sum(x > 1 for x in r)), "length_mean": float(np.mean([e["elapsed_steps"] for e in eps]))})
+        reasons: dict[str, int] = {}
+        for q in qc:
+            for problem in q.get("problems", []):
+                reasons[problem] = reasons.get(problem, 0) + 1
+        rows.append({"task_id": t, "generated": len(qc), "accepted": len(eps), "success_rate": len(eps) / len(qc),
+                     "r_max_median": float(np.median(r)) if r else None,
+                     "r_max_p95": float(np.percentile(r, 95)) if r else None,
+                     "r_max_above_1": int(sum(x > 1 for x in r)),
+                     "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
+                     "seconds_per_demo": float(np.mean([q["wall_s"] for q in qc if "wall_s" in q] or [np.nan])),
+                     "rejected": reasons})
+    if not rows:
+        raise FileNotFoundError(f"no demos of suite '{suite}' under {out}; run "
+                                f"'python -m mani_skill_softvt.demos generate --suite {suite} --out {out}' first")
+    summary = {"suite": suite, "tasks": rows,
+               "generated": sum(r["generated"] for r in rows), "accepted": sum(r["accepted"] for r in rows),
+               "r_max_median": float(np.median(all_r)) if all_r else None,
+               "r_max_p95": float(np.percentile(all_r, 95)) if all_r else None,
+               "r_max_above_1": int(sum(x > 1 for x in all_r))}
+    atomic_write_json(out / suite / "stats.json", summary)
     if all_r:
         import matplotlib
 
@@ -140,13 +159,29 @@ def stats(suite: str, out: Path) -> dict:
         ax.axvline(1.0, color="k", ls="--")
         ax.set_xlabel("R_max per demo")
         ax.set_ylabel("demos")
+        ax.set_title(f"{suite}: {len(all_r)} accepted demos")
         fig.tight_layout()
         atomic_write(out / suite / "r_max_hist.png", lambda p: fig.savefig(p, dpi=120))
         plt.close(fig)
-    summary = {"suite": suite, "tasks": rows,
-               "r_max_median": float(np.median(all_r)) if all_r else None,
-               "r_max_p95": float(np.percentile(all_r, 95)) if all_r else None}
     return summary
+
+
+def format_stats(summary: dict) -> str:
+    """The stats of :func:`stats` as a plain-text table, one row per task and a total."""
+    def num(x, fmt):
+        return "-" if x is None or x != x else format(x, fmt)
+
+    head = f"{'task':>4}  {'success':>9}  {'R_max med':>9}  {'R_max p95':>9}  {'>1':>3}  {'steps':>6}  {'s/demo':>6}  rejected"
+    lines = [f"{summary['suite']}: expert demos", head, "-" * len(head)]
+    for r in summary["tasks"]:
+        rej = ", ".join(f"{k} x{v}" for k, v in r["rejected"].items())
+        lines.append(f"{r['task_id']:>4}  {r['accepted']:>4}/{r['generated']:<4}  {num(r['r_max_median'], '9.3f')}  "
+                     f"{num(r['r_max_p95'], '9.3f')}  {r['r_max_above_1']:>3}  {num(r['length_mean'], '6.1f')}  "
+                     f"{num(r['seconds_per_demo'], '6.1f')}  {rej}")
+    lines.append("-" * len(head))
+    lines.append(f"{'all':>4}  {summary['accepted']:>4}/{summary['generated']:<4}  {num(summary['r_max_median'], '9.3f')}  "
+                 f"{num(summary['r_max_p95'], '9.3f')}  {summary['r_max_above_1']:>3}")
+    return "\n".join(lines)
 
 
 def main(argv=None):
@@ -217,8 +252,12 @@ def main(argv=None):
         print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "
               f"{info['total_tasks']} tasks (LeRobot {info['codebase_version']}, {info['fps']} fps)")
         return info
-    summary = stats(args.suite, args.out)
-    print(json.dumps(summary, indent=2))
+    try:
+        summary = stats(args.suite, args.out)
+    except FileNotFoundError as err:
+        ap.error(str(err))
+    print(format_stats(summary))
+    print(f"written: {args.out / args.suite / 'stats.json'}, {args.out / args.suite / 'r_max_hist.png'}")
     return summary
 
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.demos import generate, stats
+from mani_skill_softvt.demos import format_stats, generate, stats
 from mani_skill_softvt.expert.dataset import read_episode, screen
 
 
@@ -71,11 +71,16 @@ def test_screening_rejects_broken_episodes(dataset):
     assert any("steps" in p for p in screen(bad))
 
 
-def test_stats(dataset):
+def test_stats(dataset, tmp_path):
     out, _ = dataset
     s = stats("object_soft", out)
-    assert s["tasks"][0]["accepted"] == 1 and s["r_max_median"] < 1.0
+    assert s["tasks"][0]["accepted"] == 1 and s["r_max_median"] < 1.0 and s["tasks"][0]["rejected"] == {}
     assert (out / "object_soft" / "r_max_hist.png").exists()
+    assert json.loads((out / "object_soft" / "stats.json").read_text()) == s
+    table = format_stats(s)
+    assert "   3     1/1" in table and f"{s['r_max_median']:.3f}" in table
+    with pytest.raises(FileNotFoundError, match="run 'python -m mani_skill_softvt.demos generate"):
+        stats("object_soft", tmp_path)
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
