@@ -5,7 +5,7 @@ import pytest
 
 @pytest.fixture(scope="session")
 def soft_cube_expert_run(tmp_path_factory):
-    """Two ID episodes of the scripted expert on Object-Soft task 3 (the soft cube), run locally.
+    """One ID episode of the scripted expert on Object-Soft task 3 (the soft cube), run locally.
 
     Used by the runner's resume test and by the Ray test as the uninterrupted local reference.
     Returns (episodes, records, path of the JSONL the records were written to).
@@ -13,6 +13,6 @@ def soft_cube_expert_run(tmp_path_factory):
     from mani_skill_softvt.evaluation.protocols import episodes
     from mani_skill_softvt.evaluation.runner import evaluate
 
-    eps = episodes("object_soft", "id", tasks=[3], per_task=2)
+    eps = episodes("object_soft", "id", tasks=[3], per_task=1)
     path = tmp_path_factory.mktemp("expert_run") / "full.jsonl"
     return eps, evaluate(eps, "expert", path), path

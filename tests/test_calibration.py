@@ -58,6 +58,7 @@ def test_quick_mode_reproduces_the_committed_card_and_the_envelope_holds(tmp_pat
     assert any(committed["g_min"] <= r["closure"] <= committed["g_max"] for r in fresh["records"])
 
 
+@pytest.mark.slow  # one full calibration trial on the 8-substep twin (~45 s)
 def test_rigid_twin_deformation_is_small_against_the_tolerance():
     import gymnasium as gym
 

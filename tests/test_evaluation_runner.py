@@ -16,13 +16,17 @@ def _strip(records):
 
 def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube_expert_run):
     eps, full, full_path = soft_cube_expert_run
-    # Interrupted run: the first episode landed, the second was being written when killed.
+    # Interrupted run: killed while the episode's record was being written (a torn last line).
     part = tmp_path / "part.jsonl"
-    first_line = full_path.read_text().splitlines()[0]
-    part.write_text(first_line + "\n" + '{"suite": "object_rigid", "task_id": 3, "cond')
+    part.write_text(full_path.read_text()[:40])
     resumed = evaluate(eps, "expert", part)
-    assert _strip(resumed) == _strip(full)
-    assert len(read_jsonl(part)) == 2  # nothing duplicated, nothing lost
+    assert _strip(resumed) == _strip(full)  # the episode re-ran to the same record
+    assert len(read_jsonl(part)) == 1  # the torn line is gone, nothing duplicated
+    # A finished file resumes without running anything: progress reports the episode as done
+    # before any work and never again.
+    ticks = []
+    again = evaluate(eps, "expert", part, progress=ticks.append)
+    assert again == resumed and ticks == [1] and len(read_jsonl(part)) == 1
     for r in full:
         assert r["success"] and not r["dropped"], r
         # The expert grasps inside the calibrated envelope: within tolerance, so DSR agrees with TSR.

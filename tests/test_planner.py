@@ -122,8 +122,8 @@ def test_rrt_detours_around_an_obstacle_the_screw_would_hit(env, planned):
     assert mp.check_path(q_lift, seg.qpos, goal) is None
 
 
-def test_mplib_expert_solves_object_rigid_task3(soft_cube_expert_run):
-    # The session's expert run (default planner) on this task: its receipt names the planner that ran.
+def test_mplib_expert_solves_the_soft_cube_task(soft_cube_expert_run):
+    # The session's expert run (default planner) on Object-Soft task 3: its receipt names the planner.
     _, records, _ = soft_cube_expert_run
     for r in records:
         assert r["receipt"]["policy"] == "scripted_expert[mplib]", r["receipt"]
