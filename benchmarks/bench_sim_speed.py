@@ -26,7 +26,7 @@ def _time_steps(env, actions) -> float:
     return time.perf_counter() - t0
 
 
-def bench_softvt(obs_mode: str, steps: int, asset_id: str = "soft_stw_cube_hq") -> float:
+def bench_softvt(obs_mode: str, steps: int, asset_id: str) -> float:
     import mani_skill_softvt.tasks  # noqa: F401
     from mani_skill_softvt.expert.grasp_script import GraspPlan, ee_action, mid_height_grasp
 
@@ -69,10 +69,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=60, help="control steps measured per row (max 104)")
     args = ap.parse_args(argv)
+    from mani_skill_softvt.assets import load_card
+    from mani_skill_softvt.tasks.grasp_lift import DEFAULT_ASSET
+
+    twin = load_card(DEFAULT_ASSET).twin_id
     rows, base = [], {}
-    for mode, label, asset in (("state", "physics only", "soft_stw_cube_hq"),
-                               ("rgb", "one 224x224 camera", "soft_stw_cube_hq"),
-                               ("state", "physics only, rigid twin (8 substeps)", "rigid_stw_cube_hq")):
+    for mode, label, asset in (("state", "physics only", DEFAULT_ASSET),
+                               ("rgb", "one 224x224 camera", DEFAULT_ASSET),
+                               ("state", "physics only, rigid twin (8 substeps)", twin)):
         soft = bench_softvt(mode, args.steps, asset)
         if mode not in base:
             base[mode] = bench_pickcube(mode, args.steps)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -126,25 +127,18 @@ def stats(suite: str, out: Path) -> dict:
         eps = [q for q in qc if q["accepted"]]
         r = [e["r_max"] for e in eps]
         all_r += r
-        reasons: dict[str, int] = {}
-        for q in qc:
-            for problem in q.get("problems", []):
-                reasons[problem] = reasons.get(problem, 0) + 1
+        walls = [q["wall_s"] for q in qc if "wall_s" in q]
         rows.append({"task_id": t, "generated": len(qc), "accepted": len(eps), "success_rate": len(eps) / len(qc),
-                     "r_max_median": float(np.median(r)) if r else None,
-                     "r_max_p95": float(np.percentile(r, 95)) if r else None,
-                     "r_max_above_1": int(sum(x > 1 for x in r)),
+                     **_r_max_summary(r),
                      "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
-                     "seconds_per_demo": float(np.mean([q["wall_s"] for q in qc if "wall_s" in q] or [np.nan])),
-                     "rejected": reasons})
+                     "seconds_per_demo": float(np.mean(walls)) if walls else None,
+                     "rejected": dict(Counter(p for q in qc for p in q.get("problems", [])))})
     if not rows:
         raise FileNotFoundError(f"no demos of suite '{suite}' under {out}; run "
                                 f"'python -m mani_skill_softvt.demos generate --suite {suite} --out {out}' first")
     summary = {"suite": suite, "tasks": rows,
                "generated": sum(r["generated"] for r in rows), "accepted": sum(r["accepted"] for r in rows),
-               "r_max_median": float(np.median(all_r)) if all_r else None,
-               "r_max_p95": float(np.percentile(all_r, 95)) if all_r else None,
-               "r_max_above_1": int(sum(x > 1 for x in all_r))}
+               **_r_max_summary(all_r)}
     atomic_write_json(out / suite / "stats.json", summary)
     if all_r:
         import matplotlib
@@ -166,10 +160,17 @@ def stats(suite: str, out: Path) -> dict:
     return summary
 
 
+def _r_max_summary(r_max: list[float]) -> dict:
+    """Median, 95th percentile (None without demos) and count above 1 of per-demo R_max values."""
+    return {"r_max_median": float(np.median(r_max)) if r_max else None,
+            "r_max_p95": float(np.percentile(r_max, 95)) if r_max else None,
+            "r_max_above_1": int(sum(x > 1 for x in r_max))}
+
+
 def format_stats(summary: dict) -> str:
     """The stats of :func:`stats` as a plain-text table, one row per task and a total."""
     def num(x, fmt):
-        return "-" if x is None or x != x else format(x, fmt)
+        return "-" if x is None else format(x, fmt)
 
     head = f"{'task':>4}  {'success':>9}  {'R_max med':>9}  {'R_max p95':>9}  {'>1':>3}  {'steps':>6}  {'s/demo':>6}  rejected"
     lines = [f"{summary['suite']}: expert demos", head, "-" * len(head)]
