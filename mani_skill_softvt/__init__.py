@@ -4,11 +4,12 @@ Layout (one concept, one place):
 
 - ``physics/``     Newton FEM soft bodies, the SAPIEN <-> Newton coupling, the deformation metric
 - ``assets/``      procedural meshes, tetrahedral meshes, asset cards, rigid twins, props
-- ``tactile/``     GelSight Mini tactile sensor (Taxim-style optics, FOTS-style markers)
-- ``tasks/``       the four task suites as ManiSkill environments
-- ``calibration/`` per-object gripper envelope and deformation tolerance
-- ``expert/``      scripted expert and demonstration dataset
-- ``evaluation/``  DSR wrapper, ID/OOD protocols, reports
+- ``tactile/``     GelSight Mini tactile sensor (Taxim-style optics, FOTS-style markers, ManiSkill sensor)
+- ``tasks/``       the four task suites as ManiSkill environments, the Panda, suites and OOD factors
+- ``calibration/`` the scripted grasp trial, per-object gripper envelope and deformation tolerance
+- ``expert/``      scripted pick-and-place expert and its motion planner
+- ``data/``        demonstration data: seed ranges, demo-set layout, ManiSkill trajectories, LeRobot export
+- ``evaluation/``  R_t / R_max / DSR metrics, DSR wrapper, ID/OOD protocols, runner, reports, videos
 """
 
 __version__ = "0.1.0"

@@ -27,7 +27,7 @@ QUICK_CLOSURES = (0.3, 0.5, 0.7, 0.9)
 def calibrate_asset(asset_id: str, closures=P.CLOSURES, repeats: int = P.REPEATS, percentile: float = P.PERCENTILE,
                     out: Path = CALIBRATION_DIR, queue=None, write: bool = True) -> dict:
     """Sweep one asset (resuming from its log) and write its card and plot; return the card."""
-    from .calibration.cards import make_card, write_card
+    from .calibration.cards import CalibrationCard, make_card, write_card
     from .calibration.plots import plot_card
     from .calibration.sweep import sweep_asset
 
@@ -39,9 +39,9 @@ def calibrate_asset(asset_id: str, closures=P.CLOSURES, repeats: int = P.REPEATS
             queue.put((asset_id, n, total))
 
     records = sweep_asset(asset_id, ASSET_IDS.index(asset_id), closures, repeats, log, progress)
-    card = make_card(asset_id, records, percentile, closures, repeats)
+    card = CalibrationCard.from_dict(make_card(asset_id, records, percentile, closures, repeats), f"card of {asset_id}")
     if write:
-        write_card(card, out)
+        write_card(card.data, out)
         plot_card(card, out / "plots" / f"{asset_id}.png")
     return card
 
@@ -94,13 +94,13 @@ def main(argv=None) -> list[dict]:
             tqdm.write(_row(value))
     bar.close()
     if len(assets) > 1 or not args.quick:
-        from .calibration.cards import load_calibration
+        from .calibration.cards import load_calibration_card
         from .calibration.plots import plot_summary
 
         all_cards = []
         for a in ASSET_IDS:
             try:
-                all_cards.append(load_calibration(a, args.out))
+                all_cards.append(load_calibration_card(a, args.out))
             except FileNotFoundError:
                 pass
         plot_summary(all_cards, Path(args.out) / "plots" / "summary.png")
@@ -109,24 +109,24 @@ def main(argv=None) -> list[dict]:
 
 def comparison_table(directory: Path = CALIBRATION_DIR) -> str:
     """Markdown table of the committed cards beside the paper's values."""
-    from .calibration.cards import load_calibration
+    from .calibration.cards import load_calibration_card
 
     lines = ["| asset | g_min | g_max | span mm | tau_o % diag | paper g_min | paper g_max | paper span mm | paper tau_o % |",
              "|---|---|---|---|---|---|---|---|---|"]
     for a in ASSET_IDS:
         try:
-            c = load_calibration(a, directory)
+            c = load_calibration_card(a, directory)
         except FileNotFoundError:
             continue
         pg = P.PAPER_CARDS[a]
-        lines.append(f"| {a} | {c['g_min']:.2f} | {c['g_max']:.2f} | {c['span_mm']:.1f} | {100 * c['tau_o']:.2f} | "
+        lines.append(f"| {a} | {c.g_min:.2f} | {c.g_max:.2f} | {c.span_mm:.1f} | {100 * c.tau_o:.2f} | "
                      f"{pg[0]:.2f} | {pg[1]:.2f} | {pg[2]:.1f} | {pg[3]:.1f} |")
     return "\n".join(lines)
 
 
-def _row(card: dict) -> str:
-    return (f"{card['asset_id']:22s} g_min {card['g_min']:.2f}  g_max {card['g_max']:.2f}  "
-            f"span {card['span_mm']:5.1f} mm  tau_o {100 * card['tau_o']:.2f} % diag")
+def _row(card) -> str:
+    return (f"{card.asset_id:22s} g_min {card.g_min:.2f}  g_max {card.g_max:.2f}  "
+            f"span {card.span_mm:5.1f} mm  tau_o {100 * card.tau_o:.2f} % diag")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,8 @@
 evaluation seeds; both ranges go to ``manifest.json``), screens every episode (stream lengths,
 NaN, success, no drop, R_max <= 1), keeps a QC log of what was rejected and why, and packs the
 accepted episodes per task into ``<suite>/task<k>.h5`` + ``.json`` (ManiSkill's trajectory format,
-``source_type="motionplanning"``). Re-running skips episodes already recorded.
+``source_type="motionplanning"``). Re-running skips episodes already recorded. Where each file
+lives: :class:`~mani_skill_softvt.data.demo_set.DemoSet`.
 """
 
 from __future__ import annotations
@@ -23,24 +24,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import append_jsonl, atomic_write_json, read_jsonl
+from .data.demo_set import DemoSet
+from .fileio import append_jsonl, atomic_write_json
 from .parallel import run_tasks
 from .paths import DEMOS_DIR
-from .tasks.suites import NUM_TASKS, SUITES
+from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
 
 def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, queue) -> dict:
-    import gymnasium as gym
-
-    from . import tasks  # noqa: F401
-    from .evaluation.protocols import train_seed
-    from .evaluation.wrapper import DSRWrapper
-    from .expert.dataset import episode_json_line, record_episode, screen, write_episode
+    from .data.seeds import train_seed
+    from .data.trajectory import episode_json_line, record_episode, screen, write_episode
+    from .evaluation.wrapper import make_env
     from .expert.pick_place import draw_closure
 
-    task_dir = out / suite / f"task{task_id}"
-    qc_log = task_dir / "qc.jsonl"
-    done = {r["seed"] for r in read_jsonl(qc_log)}
+    demo_set = DemoSet(out, suite)
+    done = {r["seed"] for r in demo_set.read_qc(task_id)}
     seeds = [train_seed(task_id, i) for i in range(num)]
     env = None
     for seed in seeds:
@@ -48,15 +46,15 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
             queue.put(1)
             continue
         if env is None:
-            env = DSRWrapper(gym.make(SUITES[suite][0], task_id=task_id, obs_mode="none", control_mode="pd_ee_pose"))
+            env = make_env(suite, task_id, obs_mode="none", control_mode="pd_ee_pose")
         t0 = time.perf_counter()
-        ep = record_episode(env, seed, draw_closure(env.card, seed), planner)
+        ep = record_episode(env, seed, draw_closure(env.calibration_card, seed), planner)
         problems = screen(ep)
         if not problems:
-            write_episode(ep, task_dir / f"ep_{seed}.h5")
+            write_episode(ep, demo_set.episode_file(task_id, seed))
         line = json.loads(episode_json_line(ep, problems))
         line["wall_s"] = round(time.perf_counter() - t0, 2)
-        append_jsonl(qc_log, line)
+        append_jsonl(demo_set.qc_log(task_id), line)
         queue.put(1)
     if env is not None:
         env.close()
@@ -64,15 +62,14 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
 
 
 def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
-    from .expert.dataset import merge
+    from .data.trajectory import merge
     from .tasks import constants as C
 
-    task_dir = out / suite / f"task{task_id}"
-    qc = {r["seed"]: r for r in read_jsonl(task_dir / "qc.jsonl")}
-    accepted = [task_dir / f"ep_{s}.h5" for s in seeds if qc.get(s, {}).get("accepted")]
-    env_id = SUITES[suite][0]
+    demo_set = DemoSet(out, suite)
+    qc = {r["seed"]: r for r in demo_set.read_qc(task_id)}
+    accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
     if accepted:
-        merge(accepted, out / suite / f"task{task_id}.h5", env_id, {"task_id": task_id, "obs_mode": "none",
+        merge(accepted, demo_set.trajectory(task_id), get_suite(suite).env_id, {"task_id": task_id, "obs_mode": "none",
               "control_mode": "pd_ee_pose"}, "pd_ee_pose", C.MAX_EPISODE_STEPS)
     rejected = {s: qc[s]["problems"] for s in seeds if s in qc and not qc[s]["accepted"]}
     return {"task_id": task_id, "generated": sum(s in qc for s in seeds), "accepted": len(accepted), "rejected": rejected,
@@ -91,11 +88,12 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     """
     from tqdm import tqdm
 
-    from .evaluation.protocols import ID_EPISODES_PER_TASK, id_seed, train_seed
+    from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
     from .expert.pick_place import DEFAULT_PLANNER
 
     planner = planner or DEFAULT_PLANNER
-    atomic_write_json(out / suite / "manifest.json", {
+    demo_set = DemoSet(out, suite)
+    atomic_write_json(demo_set.manifest, {
         "suite": suite, "expert_planner": planner, "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
         "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
         "note": "training and evaluation seed ranges are disjoint by construction"})
@@ -110,7 +108,7 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
             results.append(value)
     bar.close()
     report = {"suite": suite, "tasks": sorted(results, key=lambda r: r["task_id"])}
-    atomic_write_json(out / suite / "qc_report.json", report)
+    atomic_write_json(demo_set.qc_report, report)
     return report
 
 
@@ -118,9 +116,10 @@ def stats(suite: str, out: Path) -> dict:
     """Per task: expert success (accepted / generated), R_max median and 95th percentile, episode
     lengths, wall seconds per demo, rejection reasons. Writes ``stats.json`` and ``r_max_hist.png``
     next to the suite's demos; raises FileNotFoundError when there are none."""
+    demo_set = DemoSet(out, suite)
     rows, all_r = [], []
     for t in range(NUM_TASKS):
-        qc = read_jsonl(out / suite / f"task{t}" / "qc.jsonl")
+        qc = demo_set.read_qc(t)
         if not qc:
             continue
         # From the QC log, so an interrupted run (episodes recorded, not yet merged) counts too.
@@ -139,14 +138,14 @@ def stats(suite: str, out: Path) -> dict:
     summary = {"suite": suite, "tasks": rows,
                "generated": sum(r["generated"] for r in rows), "accepted": sum(r["accepted"] for r in rows),
                **_r_max_summary(all_r)}
-    atomic_write_json(out / suite / "stats.json", summary)
+    atomic_write_json(demo_set.stats, summary)
     if all_r:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .io import atomic_write
+        from .fileio import atomic_write
 
         fig, ax = plt.subplots(figsize=(5, 3))
         ax.hist(all_r, bins=20, range=(0, 1.2), color="tab:blue")
@@ -155,7 +154,7 @@ def stats(suite: str, out: Path) -> dict:
         ax.set_ylabel("demos")
         ax.set_title(f"{suite}: {len(all_r)} accepted demos")
         fig.tight_layout()
-        atomic_write(out / suite / "r_max_hist.png", lambda p: fig.savefig(p, dpi=120))
+        atomic_write(demo_set.r_max_histogram, lambda p: fig.savefig(p, dpi=120))
         plt.close(fig)
     return summary
 
@@ -228,25 +227,25 @@ def main(argv=None):
     if args.cmd == "render":
         from tqdm import tqdm
 
-        from .expert.dataset import render_observations
+        from .data.trajectory import render_observations
 
+        demo_set = DemoSet(args.out, args.suite)
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         for t in tqdm(tasks, desc=f"render {args.obs_mode}", unit="task"):
-            src = args.out / args.suite / f"task{t}.h5"
+            src = demo_set.trajectory(t)
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
                 continue
-            n = render_observations(src, src.with_name(f"task{t}_{args.obs_mode.replace('+', '_')}.h5"),
-                                    SUITES[args.suite][0], t, args.obs_mode)
+            n = render_observations(src, demo_set.rendered(t, args.obs_mode), args.suite, t, args.obs_mode)
             print(f"task {t}: rendered {n} episodes")
         return None
     if args.cmd == "export-lerobot":
-        from .expert.lerobot_export import export_lerobot, sources_for
+        from .data.lerobot import export_lerobot
 
-        tasks = ([t for t in range(NUM_TASKS) if (args.out / args.suite / f"task{t}.h5").exists()]
-                 if args.tasks == ["all"] else [int(t) for t in args.tasks])
+        demo_set = DemoSet(args.out, args.suite)
+        tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
         try:
-            info = export_lerobot(sources_for(args.out, args.suite, tasks, args.obs_mode), args.lerobot_out,
+            info = export_lerobot(demo_set.lerobot_sources(tasks, args.obs_mode), args.lerobot_out,
                                   use_videos=not args.no_video)
         except (FileNotFoundError, ValueError) as err:
             ap.error(str(err))
@@ -258,7 +257,8 @@ def main(argv=None):
     except FileNotFoundError as err:
         ap.error(str(err))
     print(format_stats(summary))
-    print(f"written: {args.out / args.suite / 'stats.json'}, {args.out / args.suite / 'r_max_hist.png'}")
+    demo_set = DemoSet(args.out, args.suite)
+    print(f"written: {demo_set.stats}, {demo_set.r_max_histogram}")
     return summary
 
 

@@ -74,7 +74,7 @@ def main(argv=None) -> dict:
         from .evaluation.report import plot_ood_curves
 
         id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
-        from .io import read_jsonl
+        from .fileio import read_jsonl
 
         plot_ood_curves(records, read_jsonl(id_file), args.out / f"{stem}_ood.png")
     print(md.read_text())
@@ -87,10 +87,10 @@ def main(argv=None) -> dict:
 
 
 def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
-    from .calibration.cards import load_calibration, rescore
+    from .calibration.cards import load_calibration_card
     from .evaluation.metrics import rescore_record
     from .evaluation.report import write_report
-    from .io import read_jsonl
+    from .fileio import read_jsonl
     from .tasks.suites import task_spec
 
     if percentile is None:
@@ -100,8 +100,8 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
         raise SystemExit(f"no records in {path}")
     new = []
     for r in records:
-        card = load_calibration(task_spec(r["suite"], int(r["task_id"])).soft_asset_id)
-        new.append(rescore_record(r, rescore(card, percentile)["tau_o"]))
+        card = load_calibration_card(task_spec(r["suite"], int(r["task_id"])).soft_asset_id)
+        new.append(rescore_record(r, card.at_percentile(percentile)["tau_o"]))
     md, _ = write_report(new, out, f"{path.stem}_p{percentile:g}")
     print(md.read_text())
     return {"records": new}

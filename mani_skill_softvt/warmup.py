@@ -17,7 +17,7 @@ def main() -> None:
     import numpy as np
 
     from . import tasks  # noqa: F401
-    from .expert.grasp_script import ee_action
+    from .tasks.robot import ee_action
     from .tasks import constants as C
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose")

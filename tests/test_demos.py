@@ -10,7 +10,7 @@ import torch
 
 import mani_skill_softvt  # noqa: F401
 from mani_skill_softvt.demos import format_stats, generate, stats
-from mani_skill_softvt.expert.dataset import read_episode, screen
+from mani_skill_softvt.data.trajectory import read_episode, screen
 
 
 @pytest.fixture(scope="module")
@@ -84,12 +84,12 @@ def test_stats(dataset, tmp_path):
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
-    from mani_skill_softvt.expert.dataset import render_observations
+    from mani_skill_softvt.data.trajectory import render_observations
 
     out, _ = dataset
     src = out / "object_soft" / "task3.h5"
     dst = tmp_path / "obs.h5"
-    assert render_observations(src, dst, "SoftVTObjectSoft-v1", 3, "state_dict") == 1
+    assert render_observations(src, dst, "object_soft", 3, "state_dict") == 1
     with h5py.File(src, "r") as f, h5py.File(dst, "r") as g:
         t = f["traj_0/actions"].shape[0]
         qpos = g["traj_0/obs/agent/qpos"][()]

@@ -2,11 +2,13 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from mani_skill_softvt.calibration.stats import gripper_envelope, slip_distance
-from mani_skill_softvt.evaluation.metrics import rescore_record, summarize, wilson_interval
-from mani_skill_softvt.evaluation.protocols import episodes, id_seed, train_seed
+from mani_skill_softvt.evaluation.metrics import deformation_ratio, r_max, rescore_record, summarize, wilson_interval
+from mani_skill_softvt.data.seeds import id_seed, train_seed
+from mani_skill_softvt.evaluation.protocols import episodes
 
 
 def _rec(success, r_max, trace_scale=1.0):
@@ -89,3 +91,12 @@ def test_rigid_suites_score_dsr_equal_to_tsr():
     s = summarize(recs)
     assert s["dsr"] == s["tsr"] == 0.5 and s["gap"] == 0.0
     assert all(rescore_record(r, 1e-4)["dsr_success"] == r["success"] for r in recs)
+
+
+def test_ratio_and_peak():
+    d = np.array([0.01, 0.05, 0.03])
+    np.testing.assert_allclose(deformation_ratio(d, 0.1), [0.1, 0.5, 0.3])
+    assert r_max(deformation_ratio(d, 0.1)) == pytest.approx(0.5)
+    assert r_max([]) == 0.0
+    with pytest.raises(ValueError, match="positive"):
+        deformation_ratio(d, 0.0)

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from mani_skill_softvt.evaluation.runner import evaluate, record_hash
-from mani_skill_softvt.io import read_jsonl
+from mani_skill_softvt.fileio import read_jsonl
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

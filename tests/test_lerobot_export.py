@@ -17,8 +17,8 @@ import pytest
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.demos import main
-from mani_skill_softvt.expert.dataset import render_observations
-from mani_skill_softvt.expert.lerobot_export import (STATE_PARTS, Source, export_lerobot, marker_sources,
+from mani_skill_softvt.data.trajectory import render_observations
+from mani_skill_softvt.data.lerobot import (STATE_PARTS, Source, export_lerobot, marker_sources,
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR
 
@@ -36,7 +36,7 @@ def rendered(tmp_path_factory):
     for name in ("task3.h5", "task3.json"):
         shutil.copy(SAMPLE / "object_rigid" / name, root / "object_rigid" / name)
     src = root / "object_rigid" / "task3.h5"
-    render_observations(src, src.with_name("task3_rgb_tactile.h5"), "SoftVTObjectRigid-v1", 3, "rgb+tactile")
+    render_observations(src, src.with_name("task3_rgb_tactile.h5"), "object_rigid", 3, "rgb+tactile")
     return root
 
 

@@ -5,10 +5,12 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.evaluation.protocols import id_seed
-from mani_skill_softvt.expert.pick_place import PHASE_STEPS, expert_actions, mid_height_grasp, plan_pick_place
-from mani_skill_softvt.expert.planner import (MotionPlanner, PlanningError, box_obstacle, down_quat, held_object,
-                                              plan_expert_path, quat_angle, quat_to_rotvec, scene_obstacles)
+from mani_skill_softvt.data.seeds import id_seed
+from mani_skill_softvt.expert.pick_place import PHASE_STEPS, expert_actions, plan_pick_place
+from mani_skill_softvt.tasks.robot import mid_height_grasp
+from mani_skill_softvt.expert.planner import (MotionPlanner, PlanningError, box_obstacle, held_object, plan_expert_path,
+                                              scene_obstacles)
+from mani_skill_softvt.physics.transforms import down_quat, quat_angle, quat_to_rotvec
 from mani_skill_softvt.tasks import constants as C
 
 

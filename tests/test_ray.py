@@ -75,7 +75,7 @@ def test_missing_ray_says_how_to_install_it(monkeypatch):
 @pytest.mark.slow  # a full expert episode on a Ray worker (~40 s)
 def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_path, soft_cube_expert_run):
     from mani_skill_softvt.evaluation.runner import evaluate
-    from mani_skill_softvt.io import read_jsonl
+    from mani_skill_softvt.fileio import read_jsonl
 
     def strip(records):
         return [{k: v for k, v in r.items() if k != "wall_s"} for r in records]

@@ -12,13 +12,14 @@ import numpy as np
 import pytest
 import trimesh
 
+from mani_skill_softvt.physics.transforms import planar_rigid_fit
 from mani_skill_softvt.tactile import TactileFrame, TactileSensor, finger_pad_frame
 from mani_skill_softvt.tactile import constants as C
 from mani_skill_softvt.tactile.geometry import (contact_area, contact_centroid, contact_mask,
-                                                heightmap_from_triangles, pixel_centers, rigid_fit_2d,
+                                                heightmap_from_triangles, pixel_centers,
                                                 to_pixels)
 from mani_skill_softvt.tactile.markers import marker_displacements, marker_grid
-from mani_skill_softvt.tactile.optics import load_calibration, render_image
+from mani_skill_softvt.tactile.optics import load_optics, render_image
 
 R = 0.01  # sphere radius (m)
 SPHERE = trimesh.creation.icosphere(subdivisions=4, radius=R)  # 5120 faces, edges ~0.6 mm
@@ -66,7 +67,7 @@ def test_sphere_press_gives_the_geometric_contact_disc_centred_under_it():
     assert err.max() < 1e-7 and err.min() > -1.1 * facet_gap
     assert frame.depth.max() == pytest.approx(d, rel=0.02)
     # Optics: the press changes the image, and only around the contact.
-    bg = load_calibration().background
+    bg = load_optics().background
     change = np.abs(render_image(frame.depth).astype(int) - bg).sum(axis=2) > 0
     assert change[inner].mean() > 0.5
     far = np.hypot(X, Y) > 2 * expected
@@ -74,7 +75,7 @@ def test_sphere_press_gives_the_geometric_contact_disc_centred_under_it():
 
 
 def test_no_contact_gives_exactly_the_background_and_markers_at_rest():
-    calib = load_calibration()
+    calib = load_optics()
     # The background is taxim's own GelSight Mini frame (BGR on disk), 2x2-averaged to 320 x 240.
     with resources.as_file(resources.files("taxim") / "calib" / "gelsight_mini" / "dataPack.npz") as path:
         f0 = np.load(path, allow_pickle=True)["f0"]
@@ -122,7 +123,7 @@ def test_pressing_deeper_never_shrinks_the_contact():
     assert all(b >= a for a, b in zip(areas, areas[1:]))
     assert areas[-1] > 10 * areas[0]
     # ... and the indentation images get stronger (mean colour change grows).
-    bg = load_calibration().background.astype(int)
+    bg = load_optics().background.astype(int)
     change = [np.abs(render_image(heightmap_from_triangles(sphere(d), FACES)).astype(int) - bg).mean() for d in depths[::3]]
     assert all(b > a for a, b in zip(change, change[1:]))
 
@@ -186,7 +187,7 @@ def test_twist_rotates_markers_about_the_contact_centre_in_the_right_sense():
     assert (move[right_of, 1] > 0).all() and (move[left_of, 1] < 0).all()
     # The 2-D Kabsch fit behind it recovers a known rigid motion.
     pts = np.random.default_rng(0).normal(size=(20, 2))
-    angle, shift = rigid_fit_2d(pts, rotate_z(np.c_[pts, np.zeros(20)], 0.3, about=pts.mean(0))[:, :2] + [1.0, -2.0])
+    angle, shift = planar_rigid_fit(pts, rotate_z(np.c_[pts, np.zeros(20)], 0.3, about=pts.mean(0))[:, :2] + [1.0, -2.0])
     assert angle == pytest.approx(0.3) and np.allclose(shift, [1.0, -2.0])
 
 
@@ -219,7 +220,7 @@ def test_bad_input_is_rejected_with_a_clear_message():
     with pytest.raises(ValueError, match="side"):
         TactileSensor("middle")
     with pytest.raises(ValueError, match=r"\(240, 320\)"):
-        render_image(np.zeros((10, 10)), load_calibration())
+        render_image(np.zeros((10, 10)), load_optics())
     # An empty mesh is simply no contact.
     frame = sensor.render_local(np.zeros((0, 3)), np.zeros((0, 3), int))
     assert np.array_equal(frame.image, sensor.background_frame)

@@ -6,11 +6,11 @@ import pytest
 import torch
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
-from mani_skill_softvt.expert.grasp_script import ee_action
+from mani_skill_softvt.tasks.robot import ee_action
 from mani_skill_softvt.tasks import constants as C
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS, SUITES, list_tasks
 
-ENV_IDS = [v[0] for v in SUITES.values()]
+ENV_IDS = [s.env_id for s in SUITES.values()]
 
 
 def _hold_still(env, closure=0.0):
@@ -31,7 +31,7 @@ def _step_info(env, n=1):
 @pytest.mark.parametrize("env_id", [pytest.param(e, marks=[] if e == "SoftVTObjectSoft-v1" else [pytest.mark.slow])
                                     for e in ENV_IDS])
 def test_every_task_makes_resets_and_steps(env_id):
-    suite = next(s for s, v in SUITES.items() if v[0] == env_id)
+    suite = next(s.name for s in SUITES.values() if s.env_id == env_id)
     for task_id in range(NUM_TASKS):
         env = gym.make(env_id, task_id=task_id, obs_mode="state")
         obs, info = env.reset(seed=task_id)
@@ -212,7 +212,7 @@ def test_no_evaluator_quantity_reaches_the_observation(env_id, obs_mode):
 
 
 def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
-    from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
+    from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
 
     env = gym.make("SoftVTObjectRigid-v1", task_id=3, obs_mode="rgb+tactile")
     obs, _ = env.reset(seed=0)
@@ -232,4 +232,4 @@ def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
 
 
 def obs_before(env, side):
-    return torch.from_numpy(env.unwrapped._tactile[side].background_frame[None])
+    return torch.from_numpy(env.unwrapped.tactile_background(side)[None])

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..paths import ASSETS_DIR
-from .cards import ASSET_IDS, PROP_NAMES, read_obj
+from .cards import ASSET_IDS, PROP_NAMES, read_obj, twin_id
 from .materials import MATERIALS, PROP_FRICTION, RIGID_STIFFNESS_FACTOR
 from .shapes import object_parts
 from .tetmesh import tet_quality, tetrahedralize
@@ -87,7 +87,7 @@ def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION)
     q = tet_quality(tv, tt)
     volume = float(surface.volume)
     card = {
-        "asset_id": asset_id, "twin_id": "rigid_" + asset_id[len("soft_"):], "kind": "soft",
+        "asset_id": asset_id, "twin_id": twin_id(asset_id), "kind": "soft",
         "description": DESCRIPTIONS[asset_id], "dimensions": _r(surface.extents), "volume": _r(volume, 12),
         "mass": _r(density * volume, 9), "density": density, "youngs_modulus": e, "poisson_ratio": nu,
         "damping": damping, "friction": mu, "color": list(body.color), "resolution": resolution,
@@ -100,11 +100,11 @@ def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION)
     }
     _atomic_bytes(d / "card.json", _json_bytes(card))
     twin = dict(card)
-    twin_id = card["twin_id"]
-    twin.update(asset_id=twin_id, twin_id=asset_id, kind="rigid", youngs_modulus=e * RIGID_STIFFNESS_FACTOR)
+    rigid_id = card["twin_id"]
+    twin.update(asset_id=rigid_id, twin_id=asset_id, kind="rigid", youngs_modulus=e * RIGID_STIFFNESS_FACTOR)
     twin["files"] = {"surface": f"../{asset_id}/surface.obj", "tets": f"../{asset_id}/tets.npz",
                      "visual": [{**p, "file": f"../{asset_id}/{p['file']}"} for p in visual]}
-    _atomic_bytes(out / "objects" / twin_id / "card.json", _json_bytes(twin))
+    _atomic_bytes(out / "objects" / rigid_id / "card.json", _json_bytes(twin))
     return card
 
 

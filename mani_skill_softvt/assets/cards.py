@@ -19,7 +19,16 @@ ASSET_IDS = [
     "soft_pastry001", "soft_pastry002", "soft_pastry003", "soft_stw_cube_hq", "soft_pastry005",
     "soft_stw_cylinder_hq", "soft_pastry011", "soft_stw_cuboid_hq", "soft_stw_sphere_hq", "soft_pastry010",
 ]
-TWIN_IDS = ["rigid_" + a[len("soft_"):] for a in ASSET_IDS]
+
+
+def twin_id(soft_asset_id: str) -> str:
+    """Id of the rigid twin of a soft asset: soft_<name> -> rigid_<name>."""
+    if not soft_asset_id.startswith("soft_"):
+        raise ValueError(f"'{soft_asset_id}' is not a soft asset id (soft_...)")
+    return "rigid_" + soft_asset_id[len("soft_"):]
+
+
+TWIN_IDS = [twin_id(a) for a in ASSET_IDS]
 PROP_NAMES = ["table", "basket", "plate", "tea_tin", "mug", "apple"]
 
 _REBUILD = "rebuild the assets with: python -m mani_skill_softvt.assets.build"

@@ -18,7 +18,7 @@ import numpy as np
 import sapien
 from tqdm import tqdm
 
-from ..io import atomic_write
+from ..fileio import atomic_write
 from ..paths import REPO_DIR
 from .cards import ASSET_IDS, TWIN_IDS, AssetCard, load_card, read_obj
 

@@ -4,16 +4,19 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import __version__
-from ..io import atomic_write_json
+from ..fileio import atomic_write_json
 from ..paths import CALIBRATION_DIR
 from . import protocol as P
 from .stats import gripper_envelope
 
 CARD_FIELDS = ("asset_id", "g_min", "g_max", "tau_o", "percentile", "aperture_g_min_mm", "aperture_g_max_mm",
                "span_mm", "records")
+_RECALIBRATE = "re-run the calibration (python -m mani_skill_softvt.calibrate --assets <asset>)"
 
 
 def make_card(asset_id: str, records: list[dict], percentile: float, closures, repeats: int) -> dict:
@@ -46,27 +49,69 @@ def write_card(card: dict, directory: Path = CALIBRATION_DIR) -> Path:
     return path
 
 
-def load_calibration(asset_id: str, directory: Path = CALIBRATION_DIR) -> dict:
-    """A calibration card; clear errors when it is missing or malformed."""
+@dataclass(frozen=True)
+class CalibrationCard:
+    """An asset's calibration (paper section 3.5): gripper envelope, tolerance tau_o, sweep records.
+
+    ``data`` is the card's JSON as written (its hash goes into evaluation receipts); the typed
+    fields are read from it and validated when the card is loaded.
+    """
+
+    asset_id: str
+    g_min: float  # loosest closure that holds without slip in every repeat
+    g_max: float  # tightest closure whose peaks stay within tau_o
+    tau_o: float  # deformation tolerance: the percentile of peak D over the stable grasps
+    percentile: float
+    aperture_g_min_mm: float
+    aperture_g_max_mm: float
+    span_mm: float
+    records: tuple  # every sweep trial (dicts), so another percentile is a re-aggregation
+    data: dict = field(repr=False, compare=False)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "calibration card") -> "CalibrationCard":
+        """Typed, validated card; errors name ``source`` (the file) and what to do."""
+        missing = [f for f in CARD_FIELDS if f not in data]
+        if missing:
+            raise ValueError(f"{source} lacks {missing}; {_RECALIBRATE}")
+        values = {}
+        for key in CARD_FIELDS[1:-1]:
+            v = data[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{source}: {key} must be a finite number, got {v!r}; {_RECALIBRATE}")
+            values[key] = float(v)
+        if not 0.0 < values["g_min"] <= values["g_max"] <= 1.0:
+            raise ValueError(f"{source}: the envelope must satisfy 0 < g_min <= g_max <= 1, got g_min "
+                             f"{values['g_min']}, g_max {values['g_max']}; {_RECALIBRATE}")
+        if not values["tau_o"] > 0.0:
+            raise ValueError(f"{source}: tau_o must be positive, got {values['tau_o']}; {_RECALIBRATE}")
+        if not isinstance(data["records"], list):
+            raise ValueError(f"{source}: records must be a list of sweep trials; {_RECALIBRATE}")
+        return cls(asset_id=str(data["asset_id"]), records=tuple(data["records"]), data=data, **values)
+
+    @property
+    def sha256(self) -> str:
+        """Content hash of the card as written (for evaluation receipts)."""
+        return hashlib.sha256(json.dumps(self.data, sort_keys=True).encode()).hexdigest()
+
+    def at_percentile(self, percentile: float) -> dict:
+        """The envelope at another percentile, from the card's sweep records alone."""
+        return gripper_envelope(list(self.records), percentile)
+
+
+def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR) -> CalibrationCard:
+    """The calibration card of a deformable asset; clear errors when it is missing or malformed."""
     path = card_path(asset_id, directory)
     if not path.exists():
         raise FileNotFoundError(f"no calibration card for '{asset_id}' at {path}; run "
                                 f"`python -m mani_skill_softvt.calibrate --assets {asset_id}`")
     try:
-        card = json.loads(path.read_text())
+        data = json.loads(path.read_text())
     except json.JSONDecodeError as e:
-        raise ValueError(f"calibration card {path} is not valid JSON ({e}); re-run the calibration") from e
-    missing = [f for f in CARD_FIELDS if f not in card]
-    if missing:
-        raise ValueError(f"calibration card {path} lacks {missing}; re-run the calibration")
+        raise ValueError(f"calibration card {path} is not valid JSON ({e}); {_RECALIBRATE}") from e
+    if not isinstance(data, dict):
+        raise ValueError(f"calibration card {path} is not a JSON object; {_RECALIBRATE}")
+    card = CalibrationCard.from_dict(data, f"calibration card {path}")
+    if card.asset_id != asset_id:
+        raise ValueError(f"calibration card {path} describes '{card.asset_id}', expected '{asset_id}'; {_RECALIBRATE}")
     return card
-
-
-def card_hash(card: dict) -> str:
-    """Content hash of a card (for evaluation receipts)."""
-    return hashlib.sha256(json.dumps(card, sort_keys=True).encode()).hexdigest()
-
-
-def rescore(card: dict, percentile: float) -> dict:
-    """The envelope at another percentile, from the card's sweep records alone."""
-    return gripper_envelope(card["records"], percentile)

@@ -6,25 +6,26 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write
+from ..fileio import atomic_write
+from .cards import CalibrationCard
 
 
-def _draw(ax, card: dict) -> None:
-    recs = card["records"]
+def _draw(ax, card: CalibrationCard) -> None:
+    recs = card.records
     g = np.array([r["closure"] for r in recs])
     d = 100 * np.array([r["peak_deformation"] for r in recs])
     held = np.array([r["held"] for r in recs])
-    ax.axvspan(card["g_min"], card["g_max"], color="tab:green", alpha=0.12, label="envelope [g_min, g_max]")
+    ax.axvspan(card.g_min, card.g_max, color="tab:green", alpha=0.12, label="envelope [g_min, g_max]")
     ax.scatter(g[held], d[held], s=14, c="tab:green", label="held")
     ax.scatter(g[~held], d[~held], s=18, c="tab:red", marker="x", label="slipped / dropped")
-    ax.axhline(100 * card["tau_o"], color="k", ls="--", lw=1, label=f"tau_o (p{card['percentile']:.0f})")
-    ax.set_title(f"{card['asset_id']}\nspan {card['span_mm']:.1f} mm, tau_o {100 * card['tau_o']:.2f} %", fontsize=8)
+    ax.axhline(100 * card.tau_o, color="k", ls="--", lw=1, label=f"tau_o (p{card.percentile:.0f})")
+    ax.set_title(f"{card.asset_id}\nspan {card.span_mm:.1f} mm, tau_o {100 * card.tau_o:.2f} %", fontsize=8)
     ax.set_xlabel("closure g", fontsize=8)
     ax.set_ylabel("peak D (% of bbox diagonal)", fontsize=8)
     ax.tick_params(labelsize=7)
 
 
-def plot_card(card: dict, out: Path) -> None:
+def plot_card(card: CalibrationCard, out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -38,7 +39,7 @@ def plot_card(card: dict, out: Path) -> None:
     plt.close(fig)
 
 
-def plot_summary(cards: list[dict], out: Path) -> None:
+def plot_summary(cards: list[CalibrationCard], out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")

@@ -13,6 +13,8 @@ from collections import defaultdict
 
 import numpy as np
 
+from ..physics.transforms import quat_wxyz_to_matrix
+
 
 def slip_distance(centroids: np.ndarray, tcp_positions: np.ndarray, tcp_quats_wxyz: np.ndarray) -> float:
     """Displacement (m) of the object relative to the hand between the first and last sample.
@@ -26,18 +28,8 @@ def slip_distance(centroids: np.ndarray, tcp_positions: np.ndarray, tcp_quats_wx
     if not (c.shape == p.shape and c.ndim == 2 and c.shape[1] == 3 and q.shape == (len(c), 4)) or len(c) < 2:
         raise ValueError(f"slip_distance needs matching (T>=2, 3) positions and (T, 4) quaternions, got "
                          f"{c.shape}, {p.shape}, {q.shape}")
-    rel = [_rotate_inverse(q[i], c[i] - p[i]) for i in (0, -1)]
+    rel = [quat_wxyz_to_matrix(q[i]).T @ (c[i] - p[i]) for i in (0, -1)]
     return float(np.linalg.norm(rel[1] - rel[0]))
-
-
-def _rotate_inverse(q_wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:
-    w, x, y, z = q_wxyz / np.linalg.norm(q_wxyz)
-    r = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-    return r.T @ v
 
 
 def by_closure(records: list[dict]) -> dict[float, list[dict]]:

@@ -1,6 +1,6 @@
 """One calibration trial in simulation, and a resumable sweep over closures for one asset.
 
-Thin glue: the scripted grasp of :mod:`mani_skill_softvt.expert.grasp_script` on
+Thin glue: the scripted grasp of :mod:`mani_skill_softvt.calibration.grasp_script` on
 ``SoftGraspLift-v1`` with the asset; the statistics live in :mod:`.stats`.
 """
 
@@ -10,31 +10,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import append_jsonl, read_jsonl
+from ..data.seeds import calibration_seed
+from ..fileio import append_jsonl, read_jsonl
+from ..physics.transforms import yaw_between
 from . import protocol as P
 from .stats import slip_distance
 
 
-def trial_seed(asset_index: int, closure: float, repeat: int) -> int:
-    """One seed per (asset, closure, repeat): placement, yaw and jitter of that trial.
-
-    Keyed by the closure's value, so a quick run at a few closures repeats the full sweep's
-    trials at those closures exactly.
-    """
-    if not 0 <= repeat < 10:
-        raise ValueError(f"repeat must be in [0, 10), got {repeat}")
-    return P.SEED_BASE + 1_000_000 * asset_index + 10 * int(round(closure * 1000)) + repeat
-
-
 def run_trial(env, closure: float, seed: int, youngs_modulus_scale: float = 1.0) -> dict:
     """Grasp at ``closure``, lift, hold 2 s; report held/slip, peak D and the jaw aperture."""
-    from ..expert.grasp_script import GraspPlan, run_grasp_script
+    from .grasp_script import GraspPlan, run_grasp_script
 
     env.reset(seed=seed, options={"youngs_modulus_scale": youngs_modulus_scale})
     u = env.unwrapped
     rng = np.random.default_rng(seed)
     offset = rng.uniform(-P.JITTER_XY, P.JITTER_XY, 2)
-    yaw = _object_yaw(u) + rng.uniform(-P.JITTER_YAW, P.JITTER_YAW)
+    yaw = yaw_between(u.rest_vertices("object"), u.settled_nodes("object")) + rng.uniform(-P.JITTER_YAW, P.JITTER_YAW)
     plan = GraspPlan(closure=float(closure), yaw=float(yaw), steps=dict(P.STEPS))
     lift_end = P.STEPS["approach"] + P.STEPS["descend"] + P.STEPS["close"] + P.STEPS["lift"]
     count = [0]
@@ -59,13 +50,6 @@ def run_trial(env, closure: float, seed: int, youngs_modulus_scale: float = 1.0)
     }
 
 
-def _object_yaw(u) -> float:
-    """Yaw of the object about z from its settled nodes vs its rest shape (evaluator side)."""
-    from ..expert.pick_place import object_yaw
-
-    return object_yaw(u._specs["object"].vertices, u._x0["object"])
-
-
 def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_path: Path, progress=None) -> list[dict]:
     """Run every (closure, repeat) trial not yet in ``log_path``; return all records.
 
@@ -84,7 +68,7 @@ def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_pat
         env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
         try:
             for g, k in todo:
-                rec = run_trial(env, g, trial_seed(asset_index, g, k))
+                rec = run_trial(env, g, calibration_seed(asset_index, g, k))
                 rec.update(asset_id=asset_id, repeat=k)
                 append_jsonl(log_path, rec)
                 if progress is not None:

@@ -1,4 +1,4 @@
-"""Benchmark metrics as pure functions (paper section 4.2; SPEC section 5).
+"""Benchmark metrics as pure functions (paper section 4.2).
 
 R_t = D_t / tau_o, R_max = max_t R_t; an episode counts for the Deformation-aware Success Rate
 when the task succeeded and R_max <= 1. TSR = mean(T), DSR = mean(T * [R_max <= 1]).
@@ -12,10 +12,17 @@ from collections import defaultdict
 import numpy as np
 
 
-def deformation_ratio(deformation: float, tau_o: float) -> float:
+def deformation_ratio(d_t, tau_o: float):
+    """R_t = D_t / tau_o, on a scalar D_t or an array of them."""
     if not tau_o > 0:
-        raise ValueError(f"tolerance tau_o must be positive, got {tau_o}")
-    return float(deformation) / float(tau_o)
+        raise ValueError(f"deformation tolerance tau_o must be positive, got {tau_o}")
+    return np.asarray(d_t, dtype=np.float64) / tau_o if np.ndim(d_t) else float(d_t) / float(tau_o)
+
+
+def r_max(r_trace) -> float:
+    """R_max: the peak of a deformation-ratio trace R_t (0 for an empty trace)."""
+    r_trace = np.asarray(r_trace, dtype=np.float64)
+    return float(r_trace.max()) if r_trace.size else 0.0
 
 
 def dsr_success(task_success: bool, r_max: float) -> bool:
@@ -64,7 +71,7 @@ def group_summaries(records: list[dict], keys: tuple[str, ...]) -> dict:
 
 def rescore_record(record: dict, tau_new: float) -> dict:
     """The record scored against another tolerance, from its stored D_t trace (no rollout)."""
-    r_max = max(record["deformation_trace"], default=0.0) / tau_new
-    out = dict(record, tau_o=tau_new, r_max=r_max)
-    out["dsr_success"] = record["success"] if record.get("rigid") else dsr_success(record["success"], r_max)
+    peak = r_max(deformation_ratio(record["deformation_trace"], tau_new))
+    out = dict(record, tau_o=tau_new, r_max=peak)
+    out["dsr_success"] = record["success"] if record.get("rigid") else dsr_success(record["success"], peak)
     return out

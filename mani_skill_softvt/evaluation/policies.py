@@ -11,6 +11,7 @@ import importlib
 
 import numpy as np
 
+from ..physics.transforms import quat_to_rotvec
 from ..tasks import constants as C
 
 
@@ -47,10 +48,10 @@ class ScriptedExpertPolicy(Policy):
         self.env = env
 
     def reset(self, instruction: str, seed: int) -> None:
-        from ..calibration.cards import load_calibration
+        from ..calibration.cards import load_calibration_card
         from ..expert.pick_place import draw_closure, expert_actions, plan_pick_place
 
-        card = load_calibration(self.env.unwrapped.task.soft_asset_id)
+        card = load_calibration_card(self.env.unwrapped.task.soft_asset_id)
         self.closure = draw_closure(card, seed)
         plan = plan_pick_place(self.env, self.closure, self.planner)
         self.name = f"scripted_expert[{plan.planner}]"  # the planner that actually ran (receipts)
@@ -69,12 +70,7 @@ def _tcp_action(obs, closure: float) -> np.ndarray:
     if not isinstance(obs, dict) or "extra" not in obs:
         raise ValueError("this policy reads obs['extra']['tcp_pose']: use obs_mode state_dict, rgb or rgb+tactile")
     pose = np.asarray(obs["extra"]["tcp_pose"]).reshape(-1)[:7].astype(np.float64)
-    w, x, y, z = pose[3:7]
-    angle = 2 * np.arccos(np.clip(abs(w), -1, 1))
-    axis = np.array([x, y, z]) * np.sign(w if w != 0 else 1.0)
-    n = np.linalg.norm(axis)
-    rotvec = axis / n * angle if n > 1e-9 else np.zeros(3)
-    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], rotvec, [closure]]).astype(np.float32)
+    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], quat_to_rotvec(pose[3:7]), [closure]]).astype(np.float32)
 
 
 class HoldPolicy(Policy):

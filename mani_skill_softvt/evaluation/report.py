@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write, atomic_write_json
-from ..tasks.suites import OOD_CONDITIONS
+from ..fileio import atomic_write, atomic_write_json
+from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
 from .metrics import group_summaries, summarize
 
 
@@ -84,11 +84,11 @@ def plot_ood_curves(records: list[dict], id_records: list[dict], out: Path) -> N
     factors = {}
     for name, (key, value) in OOD_CONDITIONS.items():
         factors.setdefault(key, []).append((value, name))
-    nominal = {"light_intensity": 135.0, "mass_scale": 1.0, "youngs_modulus_scale": 1.0}
+    nominal = PhysicalFactors()
     fig, axes = plt.subplots(1, len(factors), figsize=(4 * len(factors), 3.2), squeeze=False)
     for ax, (key, pts) in zip(axes[0], factors.items()):
         xs, tsr, dsr = [], [], []
-        for value, name in sorted(pts + [(nominal[key], "id")]):
+        for value, name in sorted(pts + [(getattr(nominal, key), "id")]):
             sel = id_records if name == "id" else [r for r in records if r["condition"] == name]
             if not sel:
                 continue

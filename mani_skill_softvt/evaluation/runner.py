@@ -15,7 +15,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from .. import __version__
-from ..io import append_jsonl, read_jsonl
+from ..fileio import append_jsonl, read_jsonl
 from ..parallel import run_tasks
 from .protocols import episode_key
 
@@ -30,8 +30,6 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None)
 
     ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
     """
-    from ..calibration.cards import card_hash
-
     u = env.unwrapped
     options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
     obs, info = env.reset(seed=int(episode["seed"]), options=options)
@@ -39,9 +37,9 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None)
         on_step(obs, info)
     policy.bind(env)
     policy.reset(u.instruction, int(episode["seed"]))
-    ev = u.evaluator_state()[u.target_instance]
-    receipt = {"youngs_modulus": float(ev["youngs_modulus"]), "mass": float(ev["mass"]),
-               "light_intensity": u.live_light_intensity(), "calibration_card_sha256": card_hash(env.card),
+    material = u.object_material(u.target_instance)
+    receipt = {"youngs_modulus": float(material["youngs_modulus"]), "mass": float(material["mass"]),
+               "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
                "privileged": bool(getattr(policy, "privileged", False))}
     steps, done = 0, False
@@ -66,17 +64,11 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None)
 
 
 def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, queue) -> int:
-    import gymnasium as gym
-
-    from .. import tasks  # noqa: F401
-    from ..tasks.suites import SUITES
     from .policies import load_policy
-    from .wrapper import DSRWrapper
+    from .wrapper import make_env
 
     policy = load_policy(policy_spec)
-    ep0 = batch[0]
-    env = DSRWrapper(gym.make(SUITES[ep0["suite"]][0], task_id=ep0["task_id"], obs_mode=obs_mode,
-                              control_mode=control_mode))
+    env = make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode)
     try:
         for ep in batch:
             queue.put(run_episode(env, policy, ep))

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..io import atomic_write
+from ..fileio import atomic_write
 
 FPS = 20  # the control rate: one frame per env step plays in real time
 STRIP_HEIGHT = 112
@@ -203,20 +203,16 @@ def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = 
     ``RuntimeWarning`` says where they differ (a non-deterministic policy, another package
     version). ``max_steps`` truncates the episode (short previews, tests).
     """
-    import gymnasium as gym
-
-    from .. import tasks  # noqa: F401  (registers the envs)
     from ..tasks import constants as C
-    from ..tasks.suites import SUITES
+    from ..tasks.suites import get_suite
     from .policies import load_policy
     from .runner import run_episode
-    from .wrapper import DSRWrapper
+    from .wrapper import make_env
 
     missing = [k for k in ("suite", "task_id", "condition", "seed") if k not in episode]
     if missing:
         raise ValueError(f"episode lacks {missing}: pass an evaluation record or a protocols.episodes() entry")
-    if episode["suite"] not in SUITES:
-        raise ValueError(f"unknown suite '{episode['suite']}'; choose one of {sorted(SUITES)}")
+    get_suite(episode["suite"])  # a clear error for an unknown suite before any work
     if not obs_mode.endswith("+tactile") or not obs_mode.startswith("rgb"):
         raise ValueError(f"videos need camera and tactile images: obs_mode 'rgb+tactile', got '{obs_mode}'")
     if max_steps is not None and max_steps < 1:
@@ -227,8 +223,7 @@ def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = 
     horizon = max_steps or C.MAX_EPISODE_STEPS
     limit = {"max_episode_steps": max_steps} if max_steps else {}
     policy = load_policy(policy_spec)
-    env = DSRWrapper(gym.make(SUITES[episode["suite"]][0], task_id=int(episode["task_id"]), obs_mode=obs_mode,
-                              control_mode=control_mode, **limit))
+    env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=control_mode, **limit)
     result = {}
 
     def write(tmp: Path) -> None:

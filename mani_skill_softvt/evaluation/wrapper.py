@@ -1,10 +1,13 @@
-"""DSRWrapper: adds the deformation-aware scoring to every step's info (never to obs)."""
+"""DSRWrapper: adds the deformation-aware scoring to every step's info (never to obs), and
+:func:`make_env`, the one way the runner, the videos and the demos make a suite env."""
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-from ..calibration.cards import load_calibration
+from ..calibration.cards import load_calibration_card
+from ..paths import CALIBRATION_DIR
+from ..tasks.suites import get_suite
 from .metrics import deformation_ratio, dsr_success
 
 
@@ -21,13 +24,12 @@ class DSRWrapper(gym.Wrapper):
     asset's card), loaded at construction.
     """
 
-    def __init__(self, env: gym.Env, calibration_dir=None):
+    def __init__(self, env: gym.Env, calibration_dir=CALIBRATION_DIR):
         super().__init__(env)
         task = env.unwrapped.task
-        self.card = load_calibration(task.soft_asset_id, calibration_dir) if calibration_dir else \
-            load_calibration(task.soft_asset_id)
-        self.tau_o = float(self.card["tau_o"])
-        self.rigid = task.asset_id.startswith("rigid_")
+        self.calibration_card = load_calibration_card(task.soft_asset_id, calibration_dir)
+        self.tau_o = self.calibration_card.tau_o
+        self.rigid = task.rigid
         self.r_max = 0.0
         self.deformation_trace: list[float] = []
 
@@ -51,3 +53,12 @@ class DSRWrapper(gym.Wrapper):
     def step(self, action):
         obs, rew, terminated, truncated, info = self.env.step(action)
         return obs, rew, terminated, truncated, self._score(info)
+
+
+def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=CALIBRATION_DIR, **kwargs) -> gym.Env:
+    """The env of ``suite``'s task ``task_id`` (``kwargs`` go to ``gym.make``: obs_mode,
+    control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``."""
+    from .. import tasks  # noqa: F401  (registers the envs)
+
+    env = gym.make(get_suite(suite).env_id, task_id=task_id, **kwargs)
+    return DSRWrapper(env, calibration_dir) if dsr else env

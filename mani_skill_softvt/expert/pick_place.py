@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, yaw_between
 from ..tasks import constants as C
-from .grasp_script import ee_action, mid_height_grasp
+from ..tasks.robot import ee_action, mid_height_grasp
 
 PHASE_STEPS = {"approach": 15, "descend": 15, "close": 12, "lift": 15, "transport": 25, "lower": 15,
                "release": 8, "retreat": 10, "wait": 10}
@@ -44,19 +45,11 @@ class ExpertPlan:
     fallback_reason: str | None = None  # why an mplib request fell back to the Cartesian plan
 
 
-def object_yaw(rest_vertices: np.ndarray, nodes: np.ndarray) -> float:
-    """Yaw (rad) of a body about z from its rest shape to its current nodes (least squares)."""
-    a = rest_vertices[:, :2] - rest_vertices[:, :2].mean(axis=0)
-    b = nodes[:, :2] - nodes[:, :2].mean(axis=0)
-    return float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
-
-
-def draw_closure(card: dict | None, seed: int) -> float:
-    """Closure for this episode: uniform in the calibrated envelope (seeded)."""
-    if card is None:
-        raise FileNotFoundError("the expert needs the object's calibration card; run python -m mani_skill_softvt.calibrate")
+def draw_closure(card, seed: int) -> float:
+    """Closure for this episode: uniform in the calibrated envelope of ``card`` (a
+    :class:`~mani_skill_softvt.calibration.cards.CalibrationCard`), seeded by the episode seed."""
     rng = np.random.default_rng([seed, 7])
-    return float(rng.uniform(card["g_min"], card["g_max"]))
+    return float(rng.uniform(card.g_min, card.g_max))
 
 
 def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict: bool = False) -> ExpertPlan:
@@ -73,7 +66,7 @@ def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict:
     nodes = u.soft_nodes(name)
     xy = nodes.mean(axis=0)[:2]
     grasp_z = mid_height_grasp(nodes)
-    yaw = _wrap_half_turn(object_yaw(u._specs[name].vertices, nodes))
+    yaw = _wrap_half_turn(yaw_between(u.rest_vertices(name), nodes))
     lo, hi = (np.asarray(v) for v in u.target_region)
     tgt = u.target.pose.p[0].cpu().numpy().astype(np.float64)
     drop_xy = tgt[:2] + 0.5 * (lo[:2] + hi[:2])
@@ -123,13 +116,11 @@ def expert_actions(env, plan: ExpertPlan):
     mplib plans replay their TCP poses; Cartesian plans move in straight lines.
     """
     if plan.planner == "mplib":
-        from .planner import quat_to_rotvec
-
         for phase, poses, g, _ in plan.segments:
             for pose in poses:
                 # Of the two axis-angles of a near-top-down hand, the one next to the Cartesian
                 # expert's pi * (cos yaw, sin yaw, 0): the action stream stays continuous.
-                ref = ee_action(np.zeros(3), g, _yaw_of(pose[3:]))[3:6]
+                ref = down_rotvec(down_quat_yaw(pose[3:]))
                 rotvec = quat_to_rotvec(pose[3:], reference=ref)
                 yield phase, np.concatenate([pose[:3], rotvec, [g]]).astype(np.float32)
         return
@@ -142,12 +133,6 @@ def expert_actions(env, plan: ExpertPlan):
             a = min(1.0, (i + 1) / max(1, n - 2))
             yield phase, ee_action(start + (target - start) * a, g, yaw)
         tcp = target
-
-
-def _yaw_of(quat) -> float:
-    """Yaw of a near-top-down hand quaternion (wxyz): its x axis projected on the table."""
-    w, x, y, z = quat
-    return float(np.arctan2(2 * (x * y + w * z), 1 - 2 * (y * y + z * z)))
 
 
 def run_expert(env, closure: float, on_step=None, planner: str = DEFAULT_PLANNER) -> dict:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.transforms import quat_wxyz_to_matrix
+from ..physics.transforms import down_quat, quat_angle, quat_conjugate, quat_multiply, quat_wxyz_to_matrix
 from ..tasks import constants as C
 
 CONTROL_DT = 1.0 / C.CONTROL_FREQ
@@ -66,39 +66,6 @@ class Segment:
     qpos: np.ndarray  # (n, 7)
     poses: np.ndarray  # (n, 7): xyz, quaternion wxyz, in the robot base frame
     method: str  # "screw", "rrt" or "hold" (no motion)
-
-
-# ---------------------------------------------------------------- small pose helpers
-def quat_angle(q1, q2) -> float:
-    """Rotation angle (rad) between two unit quaternions (wxyz)."""
-    d = abs(float(np.dot(np.asarray(q1) / np.linalg.norm(q1), np.asarray(q2) / np.linalg.norm(q2))))
-    return float(2 * np.arccos(min(1.0, d)))
-
-
-def quat_to_rotvec(q, reference=None) -> np.ndarray:
-    """Axis-angle of a quaternion (wxyz); of its two representations near a half turn
-    (theta * n and (theta - 2 pi) * n), the one closer to ``reference``, so that a stream of
-    near-top-down orientations stays continuous."""
-    q = np.asarray(q, np.float64)
-    q = q / np.linalg.norm(q)
-    if q[0] < 0:
-        q = -q
-    s = np.linalg.norm(q[1:])
-    if s < 1e-12:
-        return np.zeros(3)
-    axis = q[1:] / s
-    theta = 2 * np.arctan2(s, q[0])  # in [0, pi]
-    r = theta * axis
-    if reference is not None:
-        alt = (theta - 2 * np.pi) * axis
-        if np.linalg.norm(alt - reference) < np.linalg.norm(r - reference):
-            r = alt
-    return r
-
-
-def down_quat(yaw: float) -> np.ndarray:
-    """Quaternion (wxyz) of the top-down hand turned by ``yaw`` about z: Rz(yaw) * Rx(pi)."""
-    return np.array([0.0, np.cos(yaw / 2), np.sin(yaw / 2), 0.0])
 
 
 def box_obstacle(name: str, lo, hi) -> Obstacle:
@@ -146,7 +113,7 @@ def scene_obstacles(env, exclude=None) -> list[Obstacle]:
     rot, p = quat_wxyz_to_matrix(pose[3:]), pose[:3]
     for i, (v, f) in enumerate(load_prop(u.task.target).convex_parts()):
         obstacles.append(Obstacle(f"{u.task.target}_{i:02d}", np.asarray(v) @ rot.T + p, np.asarray(f)))
-    for name in u._specs:
+    for name in u.object_names:
         if name != exclude:
             obstacles.append(Obstacle(f"soft_{name}", *_hull(u.soft_nodes(name).astype(np.float64))))
     return obstacles
@@ -238,13 +205,12 @@ class MotionPlanner:
     def base_to_world(self, pose) -> np.ndarray:
         rot = quat_wxyz_to_matrix(self.base_pose[3:])
         p = rot @ np.asarray(pose[:3]) + self.base_pose[:3]
-        return np.concatenate([p, _quat_mul(self.base_pose[3:], pose[3:])])
+        return np.concatenate([p, quat_multiply(self.base_pose[3:], pose[3:])])
 
     def world_to_base(self, pose) -> np.ndarray:
         rot = quat_wxyz_to_matrix(self.base_pose[3:])
         p = rot.T @ (np.asarray(pose[:3]) - self.base_pose[:3])
-        inv = self.base_pose[3:] * np.array([1, -1, -1, -1])
-        return np.concatenate([p, _quat_mul(inv, pose[3:])])
+        return np.concatenate([p, quat_multiply(quat_conjugate(self.base_pose[3:]), pose[3:])])
 
     def collisions(self, arm_q, attached: bool | None = None, finger_q: float | None = None) -> list[tuple[str, str]]:
         """(robot link or attached object, obstacle or link) pairs in contact at ``arm_q``."""
@@ -378,13 +344,6 @@ class MotionPlanner:
 
 def _fmt(hits) -> str:
     return ", ".join(sorted({f"{a} with {b}" for a, b in hits}))
-
-
-def _quat_mul(a, b) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
 
 def _resample(qs: np.ndarray, n: int) -> np.ndarray:

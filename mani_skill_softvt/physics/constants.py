@@ -1,6 +1,6 @@
 """Physics constants of the SAPIEN <-> Newton coupling (SI units).
 
-Values come from SPEC sections 2-3 (measured on this project's machines) unless noted.
+Values were measured on this project's 2-core CPU machines unless noted (README, "What is simulated").
 """
 
 import numpy as np

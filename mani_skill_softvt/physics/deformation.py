@@ -1,4 +1,4 @@
-"""The deformation metric of SoftVTBench (paper section 4.2, SPEC section 5), as pure functions.
+"""The deformation metric of SoftVTBench (paper section 4.2), as pure functions.
 
 D_t = RMS_i || R x_t,i + t - x_0,i ||  /  diag(AABB(x_0))
 
@@ -6,7 +6,8 @@ where (R, t) is the best rigid transform aligning the current FEM nodes x_t to t
 nodes x_0 (Kabsch). Removing rigid motion separates *being carried* from *being squeezed*;
 dividing by the bounding-box diagonal makes objects of different size comparable.
 
-R_t = D_t / tau_o and R_max = max_t R_t, with tau_o the object's calibrated tolerance.
+R_t = D_t / tau_o and R_max = max_t R_t, with tau_o the object's calibrated tolerance, are the
+benchmark's metrics (:mod:`mani_skill_softvt.evaluation.metrics`).
 """
 
 from __future__ import annotations
@@ -48,16 +49,3 @@ def deformation(x_t: np.ndarray, x_0: np.ndarray) -> float:
     if not np.all(np.isfinite(x_t)):
         raise ValueError("deformation: node positions contain NaN or inf (the simulation diverged)")
     return rigid_aligned_rms(x_t, x_0) / bbox_diagonal(x_0)
-
-
-def deformation_ratio(d_t, tolerance: float):
-    """R_t = D_t / tau_o. Works on a scalar or an array of D_t."""
-    if not tolerance > 0:
-        raise ValueError(f"deformation tolerance tau_o must be positive, got {tolerance}")
-    return np.asarray(d_t, dtype=np.float64) / tolerance if np.ndim(d_t) else float(d_t) / tolerance
-
-
-def r_max(r_trace) -> float:
-    """Peak of a deformation-ratio trace R_t (0 for an empty trace)."""
-    r_trace = np.asarray(r_trace, dtype=np.float64)
-    return float(r_trace.max()) if r_trace.size else 0.0

@@ -21,22 +21,39 @@ through :mod:`mani_skill_softvt.physics.transforms`.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
-from .transforms import sapien_pose_to_newton
+from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
 
 import warp as wp  # noqa: E402
 
-wp.config.quiet = True
+# Warp logs every kernel-module load and its init banner at INFO: commands print only their own output.
+wp.config.log_level = wp.LOG_WARNING
 wp.config.kernel_cache_dir = os.environ["WARP_CACHE_PATH"]
 
 import newton  # noqa: E402
+
+
+def _init_warp() -> None:
+    """Initialise Warp once, without the one-line "Could not find or load the NVIDIA CUDA driver"
+    that its native library writes to stderr on every machine without a GPU (we run on the CPU);
+    a real failure still raises. Idempotent, like ``wp.init``."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 class SimulationInstabilityError(RuntimeError):
@@ -167,7 +184,7 @@ class SoftBodyWorld:
         use_graph: bool = True,
         device: str = "cpu",
     ):
-        wp.init()
+        _init_warp()
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.sub_dt = self.dt / self.substeps
@@ -330,7 +347,6 @@ class SoftBodyWorld:
         self._collider_q = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (m.body_count, 1))
         self._nominal_tet_materials = m.tet_materials.numpy().copy()
         self._nominal_particle_mass = m.particle_mass.numpy().copy()
-        self._rest_q = m.particle_q.numpy().copy()
         self._graph = None
         self.material_scale = {"youngs_modulus": 1.0, "mass": 1.0}
 
@@ -389,7 +405,7 @@ class SoftBodyWorld:
         new_q = getattr(self, "_pending_q", self._collider_q)
         qd = np.zeros((len(new_q), 6), np.float32)
         qd[:, :3] = (new_q[:, :3] - self._collider_q[:, :3]) / self.dt  # Newton: linear first
-        qd[:, 3:] = _angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
+        qd[:, 3:] = angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
         self._q_start.assign(self._collider_q)
         self._q_end.assign(new_q)
         self.state_in.body_qd.assign(qd)
@@ -455,8 +471,6 @@ class SoftBodyWorld:
         """Place a soft body (rest shape, or ``vertices`` in its local frame) at ``pose``, at rest."""
         h = self._handle(body)
         v = h.rest_vertices if vertices is None else np.asarray(vertices, np.float64)
-        from .transforms import pose_wxyz_to_matrix
-
         m = pose_wxyz_to_matrix(np.asarray(pose, np.float64))
         world = v @ m[:3, :3].T + m[:3, 3]
         q = self.state_in.particle_q.numpy()
@@ -511,19 +525,3 @@ class SoftBodyWorld:
                     f"(volume <= {C.MIN_TET_VOLUME_RATIO} x rest) at t={self.time:.4f} s"
                 )
 
-
-def _angular_velocity_xyzw(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
-    """World-frame angular velocity taking unit quaternions q0 -> q1 (xyzw, batched) in dt."""
-    x0, y0, z0, w0 = (q0[:, i] for i in range(4))
-    x1, y1, z1, w1 = (q1[:, i] for i in range(4))
-    # dq = q1 * conj(q0)
-    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
-    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
-    y = -w1 * y0 + y1 * w0 - z1 * x0 + x1 * z0
-    z = -w1 * z0 + z1 * w0 - x1 * y0 + y1 * x0
-    sign = np.where(w < 0, -1.0, 1.0)  # shortest arc
-    v = np.stack([x, y, z], axis=1) * sign[:, None]
-    s = np.linalg.norm(v, axis=1)
-    angle = 2.0 * np.arctan2(s, np.abs(w))
-    axis = np.where(s[:, None] > 1e-12, v / np.maximum(s, 1e-12)[:, None], 0.0)
-    return (axis * (angle / dt)[:, None]).astype(np.float32)

@@ -27,7 +27,7 @@ def grasp_frame(asset_id: str, closure: float, seed: int = 0):
     import gymnasium as gym
 
     from .. import tasks  # noqa: F401
-    from ..expert.grasp_script import GraspPlan, run_grasp_script
+    from ..calibration.grasp_script import GraspPlan, run_grasp_script
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     try:

@@ -161,22 +161,3 @@ def contact_centroid(height: np.ndarray, threshold: float = C.CONTACT_THRESHOLD)
     if len(rows) == 0:
         return None
     return np.array([cols.mean(), rows.mean()])
-
-
-def rigid_fit_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
-    """Least-squares 2-D rigid motion src -> dst (Kabsch; (M, 2) point sets, M >= 1).
-
-    Returns (angle, shift): dst ~ R(angle) (src - mean(src)) + mean(src) + shift, i.e. a rotation
-    about the source centroid by ``angle`` (rad, from +x towards +y) and the centroid's
-    displacement. In 2-D the Kabsch SVD reduces to angle = atan2(sum a x b, sum a . b) over the
-    centred point pairs, which is never a reflection.
-    """
-    src, dst = np.asarray(src, np.float64), np.asarray(dst, np.float64)
-    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 2 or len(src) == 0:
-        raise ValueError(f"rigid_fit_2d needs two (M, 2) point sets of equal shape, got {src.shape} and {dst.shape}")
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    a, b = src - cs, dst - cd
-    cross = float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
-    dot = float((a * b).sum())
-    angle = float(np.arctan2(cross, dot)) if (cross or dot) else 0.0
-    return angle, cd - cs

@@ -36,7 +36,7 @@ _BORDER = cv2.BORDER_REFLECT_101  # taxim pads with reflection at the image bord
 
 
 @dataclass(frozen=True)
-class Calibration:
+class OpticsData:
     """The GelSight Mini photometric model at one output resolution."""
 
     delta_table: np.ndarray  # (bins * bins, 3, 6) float32: per (slope, direction) bin and RGB channel, the quadratic's coefficients minus the flat-gel bin's
@@ -77,7 +77,7 @@ def normal_bins(gx: np.ndarray, gy: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 @lru_cache(maxsize=None)
-def load_calibration(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT) -> Calibration:
+def load_optics(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT) -> OpticsData:
     """GelSight Mini calibration from the installed ``taxim`` package, at ``width`` x ``height``."""
     with resources.as_file(calibration_folder()) as folder:
         poly = np.load(folder / "polycalib.npz")
@@ -99,7 +99,7 @@ def load_calibration(width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT) -
     yy, xx = np.meshgrid(np.arange(height) * (sensor["h"] / height), np.arange(width) * (sensor["w"] / width), indexing="ij")
     x, y = xx.ravel(), yy.ravel()
     features = np.stack([x * x, y * y, x * y, x, y, np.ones_like(x)], axis=1).astype(np.float32)
-    return Calibration(delta, np.ascontiguousarray(background), features, float(sensor["pixmm"]))
+    return OpticsData(delta, np.ascontiguousarray(background), features, float(sensor["pixmm"]))
 
 
 def gaussian_blur(img: np.ndarray, sigma: float) -> np.ndarray:
@@ -165,13 +165,13 @@ def _crop_box(mask: np.ndarray, margin: int, align: int = 4) -> tuple[int, int, 
 _SPREAD_PX = int(np.ceil(C.GEL_KERNEL_SIGMAS * np.sqrt(sum(s * s for s in C.GEL_PYRAMID_SIGMAS) + C.GEL_FINAL_SIGMA ** 2)))
 
 
-def render_image(penetration: np.ndarray, calib: Calibration | None = None, pixel: float = C.PIXEL_SIZE) -> np.ndarray:
+def render_image(penetration: np.ndarray, calib: OpticsData | None = None, pixel: float = C.PIXEL_SIZE) -> np.ndarray:
     """RGB uint8 (H, W, 3) tactile image (no markers) of a penetration map (H, W) in metres.
 
     Zero penetration everywhere returns exactly (a copy of) the calibration background.
     """
     pen = np.asarray(penetration)
-    calib = calib or load_calibration(pen.shape[1] if pen.ndim == 2 else C.IMAGE_WIDTH,
+    calib = calib or load_optics(pen.shape[1] if pen.ndim == 2 else C.IMAGE_WIDTH,
                                       pen.shape[0] if pen.ndim == 2 else C.IMAGE_HEIGHT)
     if pen.shape != calib.shape:
         raise ValueError(f"penetration map must have shape {calib.shape} (H, W), got {pen.shape}")

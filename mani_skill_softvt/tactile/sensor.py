@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import constants as C
-from .geometry import contact_mask, heightmap_from_triangles, rigid_fit_2d, to_pixels, validate_mesh
+from ..physics.transforms import planar_rigid_fit
+from .geometry import contact_mask, heightmap_from_triangles, to_pixels, validate_mesh
 from .markers import draw_markers, marker_displacements, marker_grid
-from .optics import load_calibration, render_image
+from .optics import load_optics, render_image
 
 SIDES = ("left", "right")
 # Sign of the pad's x axis along the hand's x axis: the right camera is the mirror of the left.
@@ -95,9 +96,9 @@ class TactileSensor:
         if side not in SIDES:
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         self.side = side
-        self.calib = load_calibration()
+        self.optics = load_optics()
         self.marker_initial = marker_grid()
-        self.background_frame = draw_markers(self.calib.background, self.marker_initial)
+        self.background_frame = draw_markers(self.optics.background, self.marker_initial)
         self.reset()
 
     def reset(self) -> None:
@@ -124,7 +125,7 @@ class TactileSensor:
             return TactileFrame(self.background_frame.copy(), initial, initial.copy(), depth)
         shear_px, twist, centre = self._patch_motion(v, f)
         current = marker_displacements(self.marker_initial, depth, shear_px, twist, centre=centre)
-        image = draw_markers(render_image(depth, self.calib), current)
+        image = draw_markers(render_image(depth, self.optics), current)
         return TactileFrame(image, initial, current.astype(np.float32), depth)
 
     def _contact_vertices(self, v: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -144,6 +145,6 @@ class TactileSensor:
             self._onset = (len(v), ids, v[ids, :2].copy())
             return np.zeros(2), 0.0, None
         _, ids, xy0 = self._onset
-        angle, shift = rigid_fit_2d(xy0, v[ids, :2])
+        angle, shift = planar_rigid_fit(xy0, v[ids, :2])
         centre = to_pixels(xy0.mean(axis=0))  # rotation centre: the onset patch's centroid
         return shift / C.PIXEL_SIZE, angle, centre

@@ -31,15 +31,15 @@ NOMINAL_XY = np.array([0.0, 0.0])
 @register_env("SoftGraspLift-v1", max_episode_steps=C.MAX_EPISODE_STEPS)
 class SoftGraspLiftEnv(SoftBodyEnv):
     def __init__(self, *args, asset_id: str = DEFAULT_ASSET, **kwargs):
-        self.card = load_card(asset_id)
+        self.asset_card = load_card(asset_id)
         super().__init__(*args, **kwargs)
 
     def _soft_object_specs(self):
-        return [SoftObjectSpec.from_card("object", self.card)]
+        return [SoftObjectSpec.from_card("object", self.asset_card)]
 
     def _initialize_task(self, env_idx, options):
         rng = self._episode_rng
-        qpos = np.array([0.0, np.pi / 8, 0, -np.pi * 5 / 8, 0, np.pi * 3 / 4, np.pi / 4, C.GRIPPER_Q_OPEN, C.GRIPPER_Q_OPEN])
+        qpos = C.ROBOT_REST_QPOS.copy()
         self.agent.reset(torch.as_tensor(qpos[None], dtype=torch.float32))
         xy = NOMINAL_XY + rng.uniform(-0.02, 0.02, size=2)
         yaw = rng.uniform(-np.pi / 12, np.pi / 12)

@@ -3,7 +3,7 @@
 Differences from ManiSkill's ``panda`` (same URDF and arm gains):
 - the gripper drive is force-limited (``GRIPPER_FORCE_LIMIT``), so a full "close" stops where
   the soft object pushes back instead of driving through it;
-- the 7-D action of SPEC section 4: absolute end-effector position and axis-angle orientation
+- the 7-D action of the paper's policies: absolute end-effector position and axis-angle orientation
   in the robot base frame (task-space differential IK), then one gripper value, in one of two
   encodings (control modes):
 
@@ -28,6 +28,7 @@ from mani_skill.agents.controllers import PDJointPosMimicController, PDJointPosM
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.panda.panda import Panda
 
+from ..physics.transforms import down_rotvec
 from . import constants as C
 
 
@@ -38,6 +39,17 @@ def closure_to_q(closure):
 
 def q_to_closure(q):
     return (q - C.GRIPPER_Q_OPEN) / (C.GRIPPER_Q_CLOSED - C.GRIPPER_Q_OPEN)
+
+
+def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> np.ndarray:
+    """``pd_ee_pose`` action of the top-down hand: TCP position (world, converted to the robot base
+    frame), the axis-angle of the hand turned by ``yaw``, the gripper closure."""
+    return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], down_rotvec(yaw), [closure]]).astype(np.float32)
+
+
+def mid_height_grasp(nodes: np.ndarray) -> float:
+    """TCP height that centres the pads on an object (its nodes), without the fingertips touching the table."""
+    return float(max(C.MIN_GRASP_HEIGHT, 0.5 * (nodes[:, 2].min() + nodes[:, 2].max())))
 
 
 class ClosureGripperController(PDJointPosMimicController):

@@ -12,12 +12,16 @@ of the scene (:meth:`SoftBodyEnv._load_props`) and place things per episode
 - a settle routine before each episode; the settled nodes are x_0 of the deformation metric;
 - drawing the deformed surface in SAPIEN after every control step (cameras see the squeeze);
 - env state save/restore including FEM node positions and velocities;
-- OOD rescaling of Young's modulus and mass at reset (``options={"youngs_modulus_scale": s,
-  "mass_scale": s}``), without rebuilding kernels;
+- the physical factors of a reset (``options``: an ``ood`` condition or ``youngs_modulus_scale``,
+  ``mass_scale``, ``light_intensity``), resolved once and applied in one place
+  (:meth:`SoftBodyEnv.apply_factors`), without rebuilding kernels;
+- a GelSight Mini on each finger, a ManiSkill sensor configured like the cameras
+  (:attr:`SoftBodyEnv._default_tactile_configs`), observed in ``+tactile`` obs modes;
 - instability detection (NaN, inverted tets, exploding velocities) after every control step.
 
 Evaluator-only state (FEM nodes, object poses, deformation, material parameters) is exposed
-through :meth:`SoftBodyEnv.evaluator_state` and never through observations.
+through cheap public accessors (:meth:`soft_nodes`, :meth:`settled_nodes`, :meth:`pad_forces`, ...)
+and :meth:`SoftBodyEnv.evaluator_state`, never through observations.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
+from mani_skill.utils.common import to_numpy
 from mani_skill.utils.structs.types import SimConfig
 
 from ..assets.tetmesh import embed_points, surface_of_tets
@@ -37,8 +42,13 @@ from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.deformation import deformation
 from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_schedule
+from ..tactile.gelsight import GelSight, GelSightConfig
+from ..tactile.sensor import finger_pad_frame
 from . import constants as C
 from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
+from .suites import PhysicalFactors, resolve_factors
+
+TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plus both fingers' GelSight
 
 
 @dataclass
@@ -81,7 +91,7 @@ class SoftBodyEnv(BaseEnv):
     SUPPORTED_ROBOTS = ["panda_softvt"]
     agent: PandaSoftVT
 
-    def __init__(self, *args, robot_uids="panda_softvt", **kwargs):
+    def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, **kwargs):
         if kwargs.get("num_envs", 1) != 1:
             raise ValueError(
                 "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
@@ -95,14 +105,20 @@ class SoftBodyEnv(BaseEnv):
         self._coupling: SapienNewtonCoupling | None = None
         self._render_entities: dict[str, sapien.Entity] = {}
         self._x0: dict[str, np.ndarray] = {}
-        self._tactile: dict = {}  # side -> TactileSensor, created on first use
+        self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
         self.settle_info: dict = {}
-        super().__init__(*args, robot_uids=robot_uids, **kwargs)
+        self.factors = PhysicalFactors()
+        self._lights, self._ambient = [], None  # the scene's lights at nominal intensity (set when loaded)
+        obs_mode = obs_mode or "state"
+        self.tactile_enabled = obs_mode.endswith(TACTILE_SUFFIX)
+        super().__init__(*args, robot_uids=robot_uids, obs_mode=obs_mode.removesuffix(TACTILE_SUFFIX), **kwargs)
+        # ManiSkill parsed the camera part ("rgb"); the public name keeps "+tactile".
+        self._obs_mode = obs_mode
 
     # ------------------------------------------------------------------ config
     @property
     def _default_sim_config(self):
-        # Lockstep rate: SAPIEN and Newton both at SIM_FREQ (SPEC section 3).
+        # Lockstep rate: SAPIEN and Newton both at SIM_FREQ (see physics.coupling).
         return SimConfig(sim_freq=C.SIM_FREQ, control_freq=C.CONTROL_FREQ)
 
     @property
@@ -115,6 +131,29 @@ class SoftBodyEnv(BaseEnv):
     def _default_human_render_camera_configs(self):
         pose = sapien_utils.look_at(eye=[0.28, 0.28, 0.25], target=[0.0, 0.0, 0.06])
         return CameraConfig("render_camera", pose, 384, 288, 1.0, 0.01, 100)
+
+    @property
+    def _default_tactile_configs(self) -> list[GelSightConfig]:
+        """A GelSight Mini on each finger (configured like the cameras, built in the sensor setup)."""
+        return [GelSightConfig(f"tactile_{side}", side=side) for side in ("left", "right")]
+
+    def _setup_sensors(self, options: dict):
+        super()._setup_sensors(options)  # ManiSkill builds the cameras only
+        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_poses()[side])
+                         for cfg in self._default_tactile_configs}
+        if self.tactile_enabled:
+            # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
+            self._sensors.update({s.uid: s for s in self._tactile.values()})
+
+    def get_sensor_params(self):
+        # Tactile sensors have no camera parameters: keep sensor_param to the cameras' entries.
+        return {k: v for k, v in super().get_sensor_params().items() if v}
+
+    def _get_obs_with_sensor_data(self, info, apply_texture_transforms=True):
+        obs = super()._get_obs_with_sensor_data(info, apply_texture_transforms)
+        if self.tactile_enabled:
+            obs["tactile"] = {side: sensor.get_obs() for side, sensor in self._tactile.items()}
+        return obs
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose(p=C.ROBOT_BASE_POSE[:3], q=C.ROBOT_BASE_POSE[3:]))
@@ -132,6 +171,13 @@ class SoftBodyEnv(BaseEnv):
         raise NotImplementedError
 
     # ------------------------------------------------------------------ scene
+    def _load_lighting(self, options):
+        super()._load_lighting(options)
+        scene = self.scene.sub_scenes[0]
+        self._lights = [(e.components[0], np.array(e.components[0].color)) for e in scene.entities
+                        if e.name == "directional_light"]
+        self._ambient = np.array(self.scene.ambient_light)
+
     def _load_scene(self, options: dict):
         b = self.scene.create_actor_builder()
         he = C.TABLE_HALF_EXTENTS
@@ -208,14 +254,13 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ episode
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        factors = resolve_factors(options)
         with torch.device(self.device):
             poses = self._initialize_task(env_idx, options)
         missing = set(self._specs) - set(poses)
         if missing:
             raise RuntimeError(f"_initialize_task did not place soft objects {sorted(missing)}")
-        e_scale = float(options.get("youngs_modulus_scale", 1.0))
-        m_scale = float(options.get("mass_scale", 1.0))
-        self._world.scale_materials(youngs_modulus=e_scale, mass=m_scale)
+        self.apply_factors(factors)
         for i, name in enumerate(self._specs):
             # Spawn a hair above the support so the object settles onto it instead of starting in contact.
             p = np.asarray(poses[name], dtype=np.float64).copy()
@@ -226,6 +271,21 @@ class SoftBodyEnv(BaseEnv):
         self._update_render_meshes()
         for sensor in self._tactile.values():
             sensor.reset()
+
+    def apply_factors(self, factors: PhysicalFactors) -> None:
+        """The one place where an episode's physical factors take effect: Young's modulus and mass
+        of every soft body (rescaled in place, no kernel rebuilt) and the light intensity."""
+        self._world.scale_materials(youngs_modulus=factors.youngs_modulus_scale, mass=factors.mass_scale)
+        s = factors.light_intensity / C.NOMINAL_LIGHT_INTENSITY
+        for light, nominal in self._lights:
+            light.color = (nominal * s).tolist()
+        if self._ambient is not None:
+            self.scene.ambient_light = (self._ambient * s).tolist()
+        self.factors = factors
+
+    def live_light_intensity(self) -> float:
+        """Light intensity read back from the renderer's ambient light (for audit receipts)."""
+        return float(np.asarray(self.scene.ambient_light)[0] / self._ambient[0] * C.NOMINAL_LIGHT_INTENSITY)
 
     def settle(self, speed: float = C.SETTLE_SPEED, max_time: float = C.SETTLE_MAX_TIME) -> dict:
         """Let the soft objects come to rest on their supports (Newton only, robot frozen).
@@ -263,7 +323,7 @@ class SoftBodyEnv(BaseEnv):
         """Reject malformed actions before anything in the simulation changes."""
         if action is None or isinstance(action, dict):
             return
-        a = common_to_numpy(action)
+        a = np.asarray(to_numpy(action))
         shape = self.single_action_space.shape
         if a.shape not in (shape, (1, *shape)):
             raise ValueError(
@@ -303,7 +363,7 @@ class SoftBodyEnv(BaseEnv):
             entity.add_component(body)
 
     # ------------------------------------------------------------------ tactile
-    def _deformed_body_meshes(self) -> tuple[np.ndarray, np.ndarray]:
+    def _contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
         """World vertices and faces of every object's deformed FEM boundary: the surface the pads
         actually touch (the finer visual mesh is embedded and may sit slightly outside it)."""
         verts, faces, offset = [], [], 0
@@ -316,30 +376,29 @@ class SoftBodyEnv(BaseEnv):
 
     def pad_poses(self) -> dict[str, np.ndarray]:
         """4x4 world pose of each finger's gel surface (tactile pad frame, see tactile.sensor)."""
-        from ..tactile import pad_frame
-
         links = {s: self.agent.robot.links_map[f"panda_{s}finger"].pose.to_transformation_matrix()[0].cpu().numpy()
                  for s in ("left", "right")}
         centre = {s: links[s][:3, :3] @ np.asarray(C.FINGERTIP_OFFSET[s]) + links[s][:3, 3] for s in links}
         hand = self.agent.robot.links_map["panda_hand"].pose.to_transformation_matrix()[0].cpu().numpy()
         out = {}
-        for side, other, sign in (("left", "right", 1.0), ("right", "left", -1.0)):
+        for side, other in (("left", "right"), ("right", "left")):
             normal = centre[other] - centre[side]
             normal /= np.linalg.norm(normal)
             # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
             # contact radius) plus the tactile contact margin.
             face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS + C.TACTILE_CONTACT_MARGIN)
-            out[side] = pad_frame(face, normal, sign * hand[:3, 0].astype(np.float64))
+            out[side] = finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
         return out
 
     def tactile_frames(self) -> dict:
-        """GelSight frames of both fingers for the current state (side -> TactileFrame)."""
-        if not self._tactile:
-            from ..tactile import TactileSensor
+        """GelSight frames of both fingers for the current state (side -> TactileFrame), in any obs mode."""
+        for sensor in self._tactile.values():
+            sensor.capture()
+        return {side: sensor.frame for side, sensor in self._tactile.items()}
 
-            self._tactile = {s: TactileSensor(s) for s in ("left", "right")}
-        verts, faces = self._deformed_body_meshes()
-        return {side: self._tactile[side].render(verts, faces, pose) for side, pose in self.pad_poses().items()}
+    def tactile_background(self, side: str) -> np.ndarray:
+        """The ``side`` finger's frame without contact (markers at rest): (240, 320, 3) uint8."""
+        return self._tactile[side].renderer.background_frame
 
     # ------------------------------------------------------------------ state
     def get_state_dict(self):
@@ -350,7 +409,7 @@ class SoftBodyEnv(BaseEnv):
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
         super().set_state_dict(self._changed_rigid_state(state), env_idx)
         if "soft" in state:
-            self._set_soft_state_vector(np.asarray(common_to_numpy(state["soft"]))[0])
+            self._set_soft_state_vector(np.asarray(to_numpy(state["soft"]))[0])
 
     def _changed_rigid_state(self, state: dict) -> dict:
         """``state`` without the actors and articulation roots that already hold exactly the stored
@@ -364,7 +423,7 @@ class SoftBodyEnv(BaseEnv):
                 continue
             out[group] = {}
             for name, value in state[group].items():
-                value = torch.as_tensor(common_to_numpy(value)).reshape(1, -1)
+                value = torch.as_tensor(to_numpy(value)).reshape(1, -1)
                 current = live[group].get(name)
                 if current is not None and torch.equal(current.reshape(1, -1).to(value.dtype), value):
                     continue
@@ -383,7 +442,7 @@ class SoftBodyEnv(BaseEnv):
     def set_state(self, state, env_idx: torch.Tensor = None):
         # ManiSkill rebuilds only actors and articulations from a flat vector: the soft-body
         # state is the tail that get_state() appended.
-        state = common_to_numpy(state)
+        state = np.asarray(to_numpy(state))
         state = state[None] if state.ndim == 1 else state
         n_soft = self._soft_state_vector().size
         super().set_state(torch.from_numpy(state[:, :-n_soft]), env_idx)
@@ -422,34 +481,64 @@ class SoftBodyEnv(BaseEnv):
         self._update_render_meshes()
 
     # ------------------------------------------------------------------ evaluator-only
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        """Names of the soft objects of the scene, in simulation order ("object", or "left"/"right")."""
+        return tuple(self._specs)
+
+    def _index(self, name: str | None) -> int:
+        names = self.object_names
+        name = name or names[0]
+        if name not in names:
+            raise KeyError(f"no soft object '{name}' in this scene; objects: {list(names)}")
+        return names.index(name)
+
+    def rest_vertices(self, name: str | None = None) -> np.ndarray:
+        """Rest shape of a soft object's tet mesh in its local frame (bottom at z = 0)."""
+        return self._specs[self.object_names[self._index(name)]].vertices
+
     def soft_nodes(self, name: str | None = None) -> np.ndarray:
         """Current FEM node positions (world frame). Evaluator-only."""
-        name = name or next(iter(self._specs))
-        return self._world.particle_q(list(self._specs).index(name))
+        return self._world.particle_q(self._index(name))
+
+    def soft_node_velocities(self, name: str | None = None) -> np.ndarray:
+        """Current FEM node velocities (world frame). Evaluator-only."""
+        return self._world.particle_qd(self._index(name))
+
+    def settled_nodes(self, name: str | None = None) -> np.ndarray:
+        """x_0: the nodes after the settle before the episode (world frame). Evaluator-only."""
+        return self._x0[self.object_names[self._index(name)]]
 
     def deformation(self, name: str | None = None) -> float:
         """D_t of a soft object against its settled nodes x_0. Evaluator-only."""
-        name = name or next(iter(self._specs))
-        return deformation(self.soft_nodes(name), self._x0[name])
+        return deformation(self.soft_nodes(name), self.settled_nodes(name))
+
+    def pad_wrenches(self) -> dict[str, np.ndarray]:
+        """Last tick's contact wrench of the soft bodies on each finger pad and on the hand:
+        collider name -> [force (3) N, torque (3) N m], world frame."""
+        return {b.name: self._coupling.wrench(b.name).copy() for b in self._coupling.bodies if b.feedback}
+
+    def pad_forces(self) -> dict[str, float]:
+        """Magnitude (N) of the contact force on each finger pad: side -> force."""
+        return {side: float(np.linalg.norm(self._coupling.wrench(f"panda_{side}finger")[:3])) for side in ("left", "right")}
+
+    def object_material(self, name: str | None = None) -> dict[str, float]:
+        """Live Young's modulus (Pa) and mass (kg) of a soft object, after any OOD rescaling. Evaluator-only."""
+        i = self._index(name)
+        h = self._world.soft_bodies[i]
+        masses = self._world.model.particle_mass.numpy()[h.particle_start:h.particle_start + h.particle_count]
+        return {"youngs_modulus": h.material.youngs_modulus * self._world.material_scale["youngs_modulus"],
+                "mass": float(masses.sum())}
 
     def evaluator_state(self) -> dict:
         """Everything the evaluator may read and a policy must not: nodes, poses, D_t, materials."""
         out = {}
-        for i, name in enumerate(self._specs):
-            nodes = self._world.particle_q(i)
-            spec = self._specs[name]
-            out[name] = {
-                "nodes": nodes,
-                "x0": self._x0[name],
-                "centroid": nodes.mean(axis=0),
-                "deformation": deformation(nodes, self._x0[name]),
-                "youngs_modulus": spec.material.youngs_modulus * self._world.material_scale["youngs_modulus"],
-                "mass": float(self._world.model.particle_mass.numpy()[
-                    self._world.soft_bodies[i].particle_start : self._world.soft_bodies[i].particle_start
-                    + self._world.soft_bodies[i].particle_count
-                ].sum()),
-            }
-        out["pad_wrenches"] = {b.name: self._coupling.wrench(b.name).copy() for b in self._coupling.bodies if b.feedback}
+        for name in self.object_names:
+            nodes = self.soft_nodes(name)
+            x0 = self.settled_nodes(name)
+            out[name] = {"nodes": nodes, "x0": x0, "centroid": nodes.mean(axis=0),
+                         "deformation": deformation(nodes, x0), **self.object_material(name)}
+        out["pad_wrenches"] = self.pad_wrenches()
         return out
 
     @property
@@ -457,10 +546,6 @@ class SoftBodyEnv(BaseEnv):
         """Jaw gap between the two fingertip pads (m)."""
         q = self.agent.robot.get_qpos()[0, -2:].cpu().numpy()
         return float(q.sum())
-
-
-def common_to_numpy(x) -> np.ndarray:
-    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
 
 
 def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:

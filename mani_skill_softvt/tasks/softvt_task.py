@@ -27,11 +27,11 @@ target (downward centroid speed above 0.25 m/s), or left the table.
 both fingers' GelSight images and marker fields). ``agent`` holds joint positions/velocities,
 ``extra`` the TCP pose and the jaw width; dict modes also carry ``instruction`` (a string).
 Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is in any mode; the
-evaluator reads :meth:`SoftBodyEnv.evaluator_state`.
+evaluator reads the env's evaluator-only accessors (:meth:`SoftBodyEnv.evaluator_state`).
 
 **Action** (7-D, ``control_mode``): ``pd_ee_pose`` (absolute TCP position in the robot base
 frame, axis-angle orientation, gripper closure in [0, 1]) or ``pd_ee_pose_binary`` (gripper
-< 0.5 open, >= 0.5 close until the 20 N force limit).
+< 0.5 open, >= 0.5 close until the 10 N force limit).
 
 **Reward:** sparse, 1 on success. **Episode end:** success, drop, or 300 control steps.
 
@@ -54,7 +54,7 @@ from mani_skill.utils.registration import register_env
 from ..assets import load_card, load_prop
 from . import constants as C
 from .soft_body_env import PropCollider, SoftBodyEnv, SoftObjectSpec
-from .suites import SUITES, TaskSpec, resolve_ood, task_spec
+from .suites import SUITES, TaskSpec, task_spec
 
 OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
 
@@ -68,16 +68,13 @@ class SoftVTTaskEnv(SoftBodyEnv):
     def __init__(self, *args, suite: str = "object_soft", task_id: int = 0, obs_mode: str | None = None,
                  robot_init_qpos_noise: float = C.ROBOT_INIT_QPOS_NOISE, **kwargs):
         self.task: TaskSpec = task_spec(suite, task_id)
-        self.card = load_card(self.task.asset_id)
+        self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         obs_mode = obs_mode or "state"
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
-        self.tactile_enabled = obs_mode.endswith("+tactile")
         self._ready = False  # dict observations carry the instruction once ManiSkill's init is done
-        super().__init__(*args, obs_mode=obs_mode.replace("+tactile", ""), **kwargs)
-        # ManiSkill parsed the camera part ("rgb"); the public name keeps "+tactile".
-        self._obs_mode = obs_mode
+        super().__init__(*args, obs_mode=obs_mode, **kwargs)
         self._ready = True
 
     @property
@@ -92,7 +89,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
     # ------------------------------------------------------------------ scene
     def _soft_object_specs(self):
         names = ["left", "right"] if self.task.side else ["object"]
-        return [SoftObjectSpec.from_card(n, self.card) for n in names]
+        return [SoftObjectSpec.from_card(n, self.asset_card) for n in names]
 
     def _load_props(self, options):
         prop = load_prop(self.task.target)
@@ -106,25 +103,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         self.target_region = prop.regions["interior" if self.task.target == "basket" else "top"]
         return [PropCollider(self.task.target, self.target._bodies[0], convex_parts=prop.convex_parts(),
                              friction=prop.friction)]
-
-    def _load_lighting(self, options):
-        super()._load_lighting(options)
-        scene = self.scene.sub_scenes[0]
-        self._lights = [(e.components[0], np.array(e.components[0].color)) for e in scene.entities
-                        if e.name == "directional_light"]
-        self._ambient = np.array(self.scene.ambient_light)
-
-    def set_light_intensity(self, intensity: float) -> None:
-        """Scale every light by intensity / 135 (the paper's nominal dome-light intensity)."""
-        s = float(intensity) / C.NOMINAL_LIGHT_INTENSITY
-        for light, nominal in self._lights:
-            light.color = (nominal * s).tolist()
-        self.scene.ambient_light = (self._ambient * s).tolist()
-        self.light_intensity = float(intensity)
-
-    def live_light_intensity(self) -> float:
-        """Dome-light intensity read back from the renderer's ambient light (for audit receipts)."""
-        return float(np.asarray(self.scene.ambient_light)[0] / self._ambient[0] * C.NOMINAL_LIGHT_INTENSITY)
 
     @property
     def _default_sensor_configs(self):
@@ -153,31 +131,20 @@ class SoftVTTaskEnv(SoftBodyEnv):
         obj_xy = np.asarray(layout["object_center"]) + rng.uniform(-1, 1, 2) * layout["object_half_range"]
         yaws = rng.uniform(-C.OBJECT_YAW_RANGE, C.OBJECT_YAW_RANGE, 2)
         tgt_xy = np.asarray(layout["target_center"]) + rng.uniform(-1, 1, 2) * layout["target_half_range"]
-        factors = resolve_ood(options)
-        self.set_light_intensity(factors["light_intensity"])
         self.agent.reset(torch.as_tensor(qpos[None], dtype=torch.float32))
         self.target.set_pose(sapien.Pose(p=[tgt_xy[0], tgt_xy[1], 0.0]))
-        self.ood_factors = factors
         poses = {}
-        for k, name in enumerate(self._specs):
+        for k, name in enumerate(self.object_names):
             xy = obj_xy + (np.array([0.0, {"left": 1.0, "right": -1.0}[name] * C.SPATIAL_HALF_GAP])
                            if self.task.side else 0.0)
             q = np.array([np.cos(yaws[k] / 2), 0.0, 0.0, np.sin(yaws[k] / 2)])
             poses[name] = np.array([xy[0], xy[1], 0.0, *q])
         return poses
 
-    def _initialize_episode(self, env_idx, options):
-        options = dict(options)
-        factors = resolve_ood(options)
-        options["youngs_modulus_scale"] = factors["youngs_modulus_scale"]
-        options["mass_scale"] = factors["mass_scale"]
-        super()._initialize_episode(env_idx, options)
-
     # ------------------------------------------------------------------ evaluation
     def _object_kinematics(self, name: str) -> dict:
-        i = list(self._specs).index(name)
-        nodes = self._world.particle_q(i)
-        vel = self._world.particle_qd(i)
+        nodes = self.soft_nodes(name)
+        vel = self.soft_node_velocities(name)
         return {"centroid": nodes.mean(axis=0), "min_z": float(nodes[:, 2].min()),
                 "velocity": vel.mean(axis=0), "nodes": nodes}
 
@@ -190,14 +157,14 @@ class SoftVTTaskEnv(SoftBodyEnv):
         return bool(inside_xy and lo[2] - C.REGION_Z_TOLERANCE <= z <= hi[2])
 
     def _is_grasped(self, kin: dict) -> bool:
-        forces = [np.linalg.norm(self._coupling.wrench(f"panda_{s}finger")[:3]) for s in ("left", "right")]
+        forces = self.pad_forces().values()
         tcp = self.agent.tcp.pose.p[0].cpu().numpy()
         near = np.linalg.norm(kin["centroid"] - tcp) < C.GRASP_CENTROID_DISTANCE
         return bool(min(forces) > C.GRASP_MIN_FORCE and near)
 
     def evaluate(self):
         out = {}
-        for name in self._specs:
+        for name in self.object_names:
             kin = self._object_kinematics(name)
             grasped = self._is_grasped(kin)
             in_target = self._in_target(kin)
@@ -227,12 +194,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         width = torch.tensor([[self.gripper_width]], dtype=torch.float32)
         return {"tcp_pose": self.agent.tcp.pose.raw_pose, "gripper_width": width}
 
-    def _get_obs_with_sensor_data(self, info, apply_texture_transforms=True):
-        obs = super()._get_obs_with_sensor_data(info, apply_texture_transforms)
-        if self.tactile_enabled:
-            obs["tactile"] = self._tactile_obs()
-        return obs
-
     def _flatten_raw_obs(self, obs):
         obs = super()._flatten_raw_obs(obs)
         if self._ready and isinstance(obs, dict) and self._obs_mode != "none":
@@ -256,15 +217,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
     def single_observation_space(self):
         self.__dict__.pop("_obs_space_cache", None)
 
-    def _tactile_obs(self) -> dict:
-        """Per finger: the 320x240 GelSight image and the 11x9 marker field (initial and current px)."""
-        out = {}
-        for side, f in self.tactile_frames().items():
-            out[side] = {"rgb": torch.from_numpy(f.image[None].copy()),
-                         "marker_initial": torch.from_numpy(f.marker_initial[None].copy()),
-                         "marker_current": torch.from_numpy(f.marker_current[None].copy())}
-        return out
 
-
-for _suite, (_env_id, _layout, _kind) in SUITES.items():
-    register_env(_env_id, max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite)(SoftVTTaskEnv)
+for _suite in SUITES.values():
+    register_env(_suite.env_id, max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite.name)(SoftVTTaskEnv)

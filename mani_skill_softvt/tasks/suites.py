@@ -1,4 +1,4 @@
-"""The four SoftVTBench suites and their ten tasks each (paper appendix, task table; SPEC section 7).
+"""The four SoftVTBench suites and their ten tasks each (paper appendix, task table).
 
 A suite is (object type) x (variation axis): ``object_*`` suites hold the layout fixed and vary
 the object per task; ``spatial_*`` suites place two identical instances and name one by side.
@@ -10,6 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..assets.cards import twin_id
+from .constants import NOMINAL_LIGHT_INTENSITY
 
 # task id -> (soft asset id, object words in the Object suites, side and words in the Spatial suites)
 _TASK_TABLE = [
@@ -25,14 +28,35 @@ _TASK_TABLE = [
     ("soft_pastry010", "orange pumpkin-shaped pastry", "left", "orange pumpkin-shaped pastry"),
 ]
 
-SUITES = {
-    # name: (env id, layout, object kind)
-    "object_soft": ("SoftVTObjectSoft-v1", "object", "soft"),
-    "spatial_soft": ("SoftVTSpatialSoft-v1", "spatial", "soft"),
-    "object_rigid": ("SoftVTObjectRigid-v1", "object", "rigid"),
-    "spatial_rigid": ("SoftVTSpatialRigid-v1", "spatial", "rigid"),
-}
+@dataclass(frozen=True)
+class Suite:
+    """One benchmark suite: its env id, its layout and whether its objects are the rigid twins."""
+
+    name: str
+    env_id: str
+    layout: str  # "object" (one object, basket) or "spatial" (two instances, plate)
+    rigid: bool  # rigid twins instead of the deformable assets
+
+    @property
+    def target(self) -> str:
+        """The prop objects are placed in or on."""
+        return "basket" if self.layout == "object" else "plate"
+
+
+SUITES = {s.name: s for s in (
+    Suite("object_soft", "SoftVTObjectSoft-v1", "object", rigid=False),
+    Suite("spatial_soft", "SoftVTSpatialSoft-v1", "spatial", rigid=False),
+    Suite("object_rigid", "SoftVTObjectRigid-v1", "object", rigid=True),
+    Suite("spatial_rigid", "SoftVTSpatialRigid-v1", "spatial", rigid=True),
+)}
 NUM_TASKS = len(_TASK_TABLE)
+
+
+def get_suite(name: str) -> Suite:
+    """The suite called ``name``; a ValueError lists the known ones."""
+    if name not in SUITES:
+        raise ValueError(f"unknown suite '{name}'; choose one of {sorted(SUITES)}")
+    return SUITES[name]
 
 
 @dataclass(frozen=True)
@@ -44,26 +68,20 @@ class TaskSpec:
     instruction: str
     target: str  # "basket" (object suites) or "plate" (spatial suites)
     side: str | None  # "left"/"right": which of the two instances is instructed (spatial suites)
-
-
-def twin_id(soft_asset_id: str) -> str:
-    if not soft_asset_id.startswith("soft_"):
-        raise ValueError(f"'{soft_asset_id}' is not a soft asset id (soft_...)")
-    return "rigid_" + soft_asset_id[len("soft_"):]
+    rigid: bool  # the object is a rigid twin
 
 
 def task_spec(suite: str, task_id: int) -> TaskSpec:
-    if suite not in SUITES:
-        raise ValueError(f"unknown suite '{suite}'; choose one of {sorted(SUITES)}")
-    if not (isinstance(task_id, int) and 0 <= task_id < NUM_TASKS):
+    s = get_suite(suite)
+    if not (isinstance(task_id, int) and not isinstance(task_id, bool) and 0 <= task_id < NUM_TASKS):
         raise ValueError(f"task_id must be an integer in [0, {NUM_TASKS - 1}], got {task_id!r}")
     soft_id, obj_words, side, spatial_words = _TASK_TABLE[task_id]
-    _, layout, kind = SUITES[suite]
-    asset = soft_id if kind == "soft" else twin_id(soft_id)
-    if layout == "object":
-        return TaskSpec(suite, task_id, asset, soft_id, f"Pick up the {obj_words} and place it in the basket.", "basket", None)
-    return TaskSpec(suite, task_id, asset, soft_id,
-                    f"Pick up the {side} {spatial_words} and place it on the plate.", "plate", side)
+    asset = twin_id(soft_id) if s.rigid else soft_id
+    if s.layout == "object":
+        return TaskSpec(suite, task_id, asset, soft_id, f"Pick up the {obj_words} and place it in the basket.",
+                        s.target, None, s.rigid)
+    return TaskSpec(suite, task_id, asset, soft_id, f"Pick up the {side} {spatial_words} and place it on the plate.",
+                    s.target, side, s.rigid)
 
 
 def list_tasks(suite: str) -> list[TaskSpec]:
@@ -71,9 +89,8 @@ def list_tasks(suite: str) -> list[TaskSpec]:
     return [task_spec(suite, i) for i in range(NUM_TASKS)]
 
 
-# The nine single-factor OOD conditions of the deformable suites (paper section 4; SPEC section 8):
+# The nine single-factor OOD conditions of the deformable suites (paper section 4.3):
 # name -> (reset option, value). Each reuses the ID task, initial state and seed.
-NOMINAL_FACTORS = {"light_intensity": 135.0, "mass_scale": 1.0, "youngs_modulus_scale": 1.0}
 OOD_CONDITIONS = {
     "light_67.5": ("light_intensity", 67.5),
     "light_180": ("light_intensity", 180.0),
@@ -87,14 +104,26 @@ OOD_CONDITIONS = {
 }
 
 
-def resolve_ood(options: dict | None) -> dict:
+@dataclass(frozen=True)
+class PhysicalFactors:
+    """The physical factors of an episode that OOD conditions vary; the defaults are nominal."""
+
+    light_intensity: float = NOMINAL_LIGHT_INTENSITY  # the paper's dome-light intensity
+    mass_scale: float = 1.0
+    youngs_modulus_scale: float = 1.0
+
+
+FACTOR_OPTIONS = tuple(PhysicalFactors.__dataclass_fields__)  # reset options that set one factor
+
+
+def resolve_factors(options: dict | None) -> PhysicalFactors:
     """Physical factors of a reset: nominal, an ``ood`` condition by name, or explicit factors.
 
-    >>> resolve_ood({"ood": "mass_x2.5"})["mass_scale"]
+    >>> resolve_factors({"ood": "mass_x2.5"}).mass_scale
     2.5
     """
     options = options or {}
-    factors = dict(NOMINAL_FACTORS)
+    factors = {}
     name = options.get("ood")
     if name not in (None, "id"):
         if name not in OOD_CONDITIONS:
@@ -103,10 +132,10 @@ def resolve_ood(options: dict | None) -> dict:
         if key in options and float(options[key]) != value:
             raise ValueError(f"reset options name OOD condition '{name}' but also {key}={options[key]}")
         factors[key] = value
-    for key in NOMINAL_FACTORS:
+    for key in FACTOR_OPTIONS:
         if key in options:
             value = float(options[key])
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"reset option {key} must be a positive finite number, got {options[key]!r}")
             factors[key] = value
-    return factors
+    return PhysicalFactors(**factors)

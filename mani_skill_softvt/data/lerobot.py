@@ -2,7 +2,7 @@
 
 For users who train with LeRobot or openpi. Input: a ManiSkill trajectory file (``task<k>.h5``,
 actions and instruction) and its rendered observations (``task<k>_rgb_tactile.h5``, the output
-of ``render_observations``). Output, under one root::
+of ``render_observations``; :class:`~mani_skill_softvt.data.demo_set.DemoSet` finds both). Output, under one root::
 
     meta/info.json                                  codebase_version "v3.0", fps, features
     meta/stats.json                                 per-feature min/max/mean/std/count/quantiles
@@ -25,7 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..io import atomic_write, atomic_write_json
+from ..fileio import atomic_write, atomic_write_json
 
 CODEBASE_VERSION = "v3.0"
 FPS = 20  # the control frequency: one frame per env step
@@ -461,21 +461,5 @@ def _write_episodes_meta(out_dir: Path, rows: list[dict], stats: list[dict]) -> 
     _write_parquet(out_dir / "meta" / "episodes" / "chunk-000" / "file-000.parquet", table)
 
 
-def sources_for(demos_dir: Path, suite: str, tasks: list[int], obs_mode: str = "rgb+tactile") -> list[Source]:
-    """The (trajectory, rendered) pairs ``demos generate`` + ``demos render`` wrote for ``tasks``."""
-    out = []
-    for t in tasks:
-        traj = Path(demos_dir) / suite / f"task{t}.h5"
-        rendered = traj.with_name(f"task{t}_{obs_mode.replace('+', '_')}.h5")
-        if not traj.exists():
-            raise FileNotFoundError(f"{traj} does not exist; run `python -m mani_skill_softvt.demos generate "
-                                    f"--suite {suite} --tasks {t}` first")
-        if not rendered.exists():
-            raise FileNotFoundError(f"{rendered} does not exist; run `python -m mani_skill_softvt.demos render "
-                                    f"--suite {suite} --tasks {t} --obs-mode {obs_mode}` first")
-        out.append(Source(traj, rendered))
-    return out
-
-
-__all__ = ["Source", "export_lerobot", "sources_for", "feature_stats", "image_stats", "aggregate_stats",
+__all__ = ["Source", "export_lerobot", "feature_stats", "image_stats", "aggregate_stats",
            "tasks_table", "video_sources", "marker_sources"]

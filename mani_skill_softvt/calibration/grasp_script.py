@@ -1,9 +1,9 @@
 """A scripted top-down grasp, lift, hold and place, in absolute end-effector pose actions.
 
-Used by the README demo and the physics tests now, and by calibration sweeps and the expert
-later: it drives any :class:`~mani_skill_softvt.tasks.SoftBodyEnv` whose control mode is
-``pd_ee_pose`` and records, per control step, the evaluator-side quantities (D_t, jaw width,
-object height, pad force) that those consumers score.
+The calibration trial (grasp, lift, hold: :mod:`.sweep`), the grasp demo, the tactile gallery and
+the physics tests use it: it drives any :class:`~mani_skill_softvt.tasks.SoftBodyEnv` whose
+control mode is ``pd_ee_pose`` and records, per control step, the evaluator-side quantities (D_t,
+jaw width, object height, pad force) that those consumers score.
 """
 
 from __future__ import annotations
@@ -12,10 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..tasks import constants as C
-
-DOWN = np.array([np.pi, 0.0, 0.0])  # axis-angle of a gripper pointing straight down
-
+from ..tasks.robot import ee_action, mid_height_grasp
 
 @dataclass
 class GraspPlan:
@@ -39,20 +36,6 @@ class GraspPlan:
             ("approach", hi, g_open), ("descend", lo, g_open), ("close", lo, g_closed), ("lift", up, g_closed),
             ("hold", up, g_closed), ("lower", lo, g_closed), ("open", lo, g_open), ("retreat", hi, g_open),
         ]
-
-
-def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> np.ndarray:
-    """pd_ee_pose action: position in the robot base frame, axis-angle, gripper closure."""
-    # Rotating the down-pointing hand by yaw about world z; composed as axis-angle of Rz(yaw)*Rx(pi).
-    c, s = np.cos(yaw / 2), np.sin(yaw / 2)
-    # quaternion (w,x,y,z) of Rz(yaw) * Rx(pi) = (0, c, s, 0): rotation by pi about (c, s, 0)
-    rotvec = np.pi * np.array([c, s, 0.0])
-    return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], rotvec, [closure]]).astype(np.float32)
-
-
-def mid_height_grasp(nodes: np.ndarray) -> float:
-    """TCP height that centres the pads on the object, without the fingertips touching the table."""
-    return float(max(C.MIN_GRASP_HEIGHT, 0.5 * (nodes[:, 2].min() + nodes[:, 2].max())))
 
 
 def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None,
@@ -86,7 +69,7 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
             rec["object_centroid"].append(nodes.mean(axis=0))
             rec["tcp"].append(u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64))
             rec["tcp_quat"].append(u.agent.tcp.pose.q[0].cpu().numpy().astype(np.float64))
-            rec["pad_force"].append(float(np.linalg.norm(u._coupling.wrench("panda_leftfinger")[:3])))
+            rec["pad_force"].append(u.pad_forces()["left"])
             if on_step is not None and on_step(phase, i, n) == "stop":
                 stop = True
                 break

@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from mani_skill_softvt.io import append_jsonl, atomic_write, atomic_write_json, read_jsonl
+from mani_skill_softvt.fileio import append_jsonl, atomic_write, atomic_write_json, read_jsonl
 
 
 def test_torn_last_line_is_dropped_and_the_next_record_stands_alone(tmp_path):

@@ -17,8 +17,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..io import atomic_write, atomic_write_json
-from .pick_place import DEFAULT_PLANNER
+from ..expert.pick_place import DEFAULT_PLANNER
+from ..fileio import atomic_write, atomic_write_json
 
 _CLOSURE_DESC = "closure drawn from the calibrated envelope [g_min, g_max]"
 SOURCE_DESCS = {
@@ -29,7 +29,6 @@ SOURCE_DESCS = {
                   f"controller, {_CLOSURE_DESC}"),
 }
 SOURCE_DESC = SOURCE_DESCS[DEFAULT_PLANNER]
-LEGACY_PLANNER = "cartesian"  # episodes recorded before the planner was stored came from the Cartesian expert
 
 
 def source_desc(planners) -> str:
@@ -54,13 +53,14 @@ def _flatten_state(state: dict, prefix: str = "") -> dict[str, np.ndarray]:
 
 def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNER) -> dict:
     """Run the expert once on a DSR-wrapped suite env; return every stream as numpy arrays."""
-    from .pick_place import expert_actions, plan_pick_place
+    from ..expert.pick_place import expert_actions, plan_pick_place
 
     obs, info = env.reset(seed=seed)
     u = env.unwrapped
     name = u.target_instance
     states = [_flatten_state(u.get_state_dict())]
-    ev = {"nodes": [u.soft_nodes(name).astype(np.float32)], "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u._specs])],
+    ev = {"nodes": [u.soft_nodes(name).astype(np.float32)],
+          "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u.object_names])],
           "deformation": [env.deformation_trace[-1]], "deformation_ratio": [info["deformation_ratio"]]}
     acts, terms, truncs, succ, fail, grasp, drop, force = [], [], [], [], [], [], [], []
     plan = plan_pick_place(env, closure, planner)  # plan.planner: the planner actually used (mplib falls back)
@@ -73,10 +73,11 @@ def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNE
         fail.append(bool(info["fail"][0]))
         grasp.append(bool(info["is_grasped"][0]))
         drop.append(bool(info["dropped"][0]))
-        force.append([np.linalg.norm(u._coupling.wrench(f"panda_{s}finger")[:3]) for s in ("left", "right")])
+        pads = u.pad_forces()
+        force.append([pads["left"], pads["right"]])
         states.append(_flatten_state(u.get_state_dict()))
         ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
-        ev["centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u._specs]))
+        ev["centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
         ev["deformation"].append(env.deformation_trace[-1])
         ev["deformation_ratio"].append(info["deformation_ratio"])
         if terms[-1] or truncs[-1]:
@@ -151,7 +152,7 @@ def _write_traj(g, ep: dict) -> None:
         _dataset(e, k, v)
     for k in ("seed", "closure", "instruction", "target_instance"):
         g.attrs[k] = ep[k]
-    g.attrs["planner"] = ep.get("planner", LEGACY_PLANNER)
+    g.attrs["planner"] = ep["planner"]
 
 
 def read_episode(path: Path) -> dict:
@@ -176,7 +177,7 @@ def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict
         with h5py.File(tmp, "w") as f:
             for i, path in enumerate(episode_files):
                 ep = read_episode(path)
-                planners.append(ep.get("planner", LEGACY_PLANNER))
+                planners.append(ep["planner"])
                 _write_traj(f.create_group(f"traj_{i}"), ep)
                 meta["episodes"].append({
                     "episode_id": i, "episode_seed": int(ep["seed"]), "reset_kwargs": {"seed": int(ep["seed"])},
@@ -191,7 +192,7 @@ def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict
 
 
 def episode_json_line(ep: dict, problems: list[str]) -> str:
-    return json.dumps({"seed": ep["seed"], "planner": ep.get("planner", LEGACY_PLANNER), "accepted": not problems,
+    return json.dumps({"seed": ep["seed"], "planner": ep["planner"], "accepted": not problems,
                        "problems": problems,
                        "steps": int(len(ep["actions"])), "r_max": float(np.max(ep["evaluator"]["deformation_ratio"]))})
 
@@ -210,16 +211,16 @@ def _state_dict_at(env_states: dict, t: int) -> dict:
     return state
 
 
-def render_observations(trajectory_h5: Path, out_h5: Path, env_id: str, task_id: int, obs_mode: str) -> int:
+def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str) -> int:
     """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
 
     Every recorded env state (reset + one per step) is restored and observed in order, so the
     cameras, the tactile images (whose shear tracking follows the episode) and the actions share
     one timeline with no resampling. Observations go to ``traj_<i>/obs/...`` of ``out_h5``.
     """
-    import gymnasium as gym
+    from ..evaluation.wrapper import make_env
 
-    env = gym.make(env_id, task_id=task_id, obs_mode=obs_mode)
+    env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode)
     u = env.unwrapped
     n = 0
 

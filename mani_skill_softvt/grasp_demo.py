@@ -1,7 +1,7 @@
 """Foundation demo: a Panda grasps a soft cube, lifts it, holds it, and puts it back down.
 
-    python -m mani_skill_softvt.demo                # defaults: seed 0, binary (force-limited) close
-    python -m mani_skill_softvt.demo --closure 0.6  # continuous closure target in [0, 1]
+    python -m mani_skill_softvt.grasp_demo                # defaults: seed 0, binary (force-limited) close
+    python -m mani_skill_softvt.grasp_demo --closure 0.6  # continuous closure target in [0, 1]
 
 Prints the peak normalised deformation D, the lift height and the slip during the hold, and
 writes an image strip (one frame per phase) and, with ``--video``, an mp4 of the episode.
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_write
+from .fileio import atomic_write
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.demo", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.grasp_demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--closure", type=float, default=1.0, help="gripper closure in [0,1]; 1 = close until the force limit")
@@ -32,7 +32,7 @@ def main(argv=None) -> dict:
     from tqdm import tqdm
 
     from . import tasks  # noqa: F401  (registers envs)
-    from .expert.grasp_script import GraspPlan, run_grasp_script
+    from .calibration.grasp_script import GraspPlan, run_grasp_script
 
     t0 = time.time()
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", render_mode="rgb_array")

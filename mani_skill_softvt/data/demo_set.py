@@ -1,0 +1,95 @@
+"""The on-disk layout of one suite's demonstrations, in one place.
+
+::
+
+    <root>/<suite>/manifest.json               seed ranges (training, ID evaluation) and the expert's planner
+    <root>/<suite>/task<k>/ep_<seed>.h5        one recorded episode (written as it finishes: resume)
+    <root>/<suite>/task<k>/qc.jsonl            the screening verdict of every generated episode
+    <root>/<suite>/task<k>.h5 / .json          accepted episodes in ManiSkill's trajectory format
+    <root>/<suite>/task<k>_<obs_mode>.h5       the same episodes re-rendered into observations
+    <root>/<suite>/qc_report.json, stats.json, r_max_hist.png
+
+Generation (:mod:`mani_skill_softvt.demos`), rendering, the LeRobot export and the statistics
+all find their files through :class:`DemoSet`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..fileio import read_jsonl
+from ..tasks.suites import NUM_TASKS, get_suite
+
+
+@dataclass(frozen=True)
+class DemoSet:
+    """The demonstrations of ``suite`` under ``root`` (see the module docstring)."""
+
+    root: Path
+    suite: str
+
+    def __post_init__(self):
+        get_suite(self.suite)  # a clear error for an unknown suite
+        object.__setattr__(self, "root", Path(self.root))
+
+    @property
+    def dir(self) -> Path:
+        return self.root / self.suite
+
+    @property
+    def manifest(self) -> Path:
+        return self.dir / "manifest.json"
+
+    @property
+    def qc_report(self) -> Path:
+        return self.dir / "qc_report.json"
+
+    @property
+    def stats(self) -> Path:
+        return self.dir / "stats.json"
+
+    @property
+    def r_max_histogram(self) -> Path:
+        return self.dir / "r_max_hist.png"
+
+    def episode_dir(self, task_id: int) -> Path:
+        return self.dir / f"task{task_id}"
+
+    def episode_file(self, task_id: int, seed: int) -> Path:
+        return self.episode_dir(task_id) / f"ep_{seed}.h5"
+
+    def qc_log(self, task_id: int) -> Path:
+        return self.episode_dir(task_id) / "qc.jsonl"
+
+    def read_qc(self, task_id: int) -> list[dict]:
+        """The screening records of a task's generated episodes (empty if none)."""
+        return read_jsonl(self.qc_log(task_id))
+
+    def trajectory(self, task_id: int) -> Path:
+        """The task's accepted episodes, ManiSkill trajectory file (its ``.json`` sits beside it)."""
+        return self.dir / f"task{task_id}.h5"
+
+    def rendered(self, task_id: int, obs_mode: str) -> Path:
+        """The task's episodes re-rendered into ``obs_mode`` observations."""
+        return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}.h5"
+
+    def tasks_with_trajectories(self) -> list[int]:
+        return [t for t in range(NUM_TASKS) if self.trajectory(t).exists()]
+
+    def lerobot_sources(self, tasks: list[int], obs_mode: str = "rgb+tactile") -> list:
+        """The (trajectory, rendered) pairs of ``tasks`` for the LeRobot export; a missing file is
+        named with the command that writes it."""
+        from .lerobot import Source
+
+        out = []
+        for t in tasks:
+            traj, rendered = self.trajectory(t), self.rendered(t, obs_mode)
+            if not traj.exists():
+                raise FileNotFoundError(f"{traj} does not exist; run `python -m mani_skill_softvt.demos generate "
+                                        f"--suite {self.suite} --tasks {t} --out {self.root}` first")
+            if not rendered.exists():
+                raise FileNotFoundError(f"{rendered} does not exist; run `python -m mani_skill_softvt.demos render "
+                                        f"--suite {self.suite} --tasks {t} --obs-mode {obs_mode} --out {self.root}` first")
+            out.append(Source(traj, rendered))
+        return out

@@ -1,0 +1,74 @@
+"""The GelSight Mini as a ManiSkill sensor: configured like a camera, captured with the cameras.
+
+``GelSightConfig("tactile_left", side="left")`` beside the ``CameraConfig`` entries of an env;
+the env builds one :class:`GelSight` per config in its sensor setup. Each capture renders the
+finger's frame from two callables the env hands over: the contact surface (the deformed
+object meshes, world frame) and the pad's 4x4 world pose. The sensor itself holds no simulator
+handle, so the optics (:class:`~mani_skill_softvt.tactile.sensor.TactileSensor`) stay pure.
+
+Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "marker_initial": (1, 99, 2)
+float32 px, "marker_current": (1, 99, 2) float32 px}``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
+
+from .sensor import SIDES, TactileFrame, TactileSensor
+
+
+@dataclass
+class GelSightConfig(BaseSensorConfig):
+    """A GelSight Mini on one Panda finger (``side`` "left" or "right")."""
+
+    side: str = "left"
+
+    def __post_init__(self):
+        if self.side not in SIDES:
+            raise ValueError(f"GelSightConfig side must be one of {SIDES}, got {self.side!r}")
+
+
+class GelSight(BaseSensor):
+    """One finger's tactile sensor in a ManiSkill scene (see the module docstring)."""
+
+    config: GelSightConfig
+
+    def __init__(self, config: GelSightConfig, contact_surface: Callable[[], tuple[np.ndarray, np.ndarray]],
+                 pad_pose: Callable[[], np.ndarray]):
+        super().__init__(config)
+        self.renderer = TactileSensor(config.side)
+        self._contact_surface = contact_surface
+        self._pad_pose = pad_pose
+        self.frame: TactileFrame | None = None
+
+    @property
+    def side(self) -> str:
+        return self.config.side
+
+    def reset(self) -> None:
+        """Start of an episode: forget the contact onset (marker shear is measured from it)."""
+        self.renderer.reset()
+        self.frame = None
+
+    def capture(self) -> None:
+        vertices, faces = self._contact_surface()
+        self.frame = self.renderer.render(vertices, faces, self._pad_pose())
+
+    def get_obs(self, **kwargs) -> dict[str, torch.Tensor]:
+        if self.frame is None:
+            self.capture()
+        f = self.frame
+        return {"rgb": torch.from_numpy(f.image[None].copy()),
+                "marker_initial": torch.from_numpy(f.marker_initial[None].copy()),
+                "marker_current": torch.from_numpy(f.marker_current[None].copy())}
+
+    def get_images(self) -> torch.Tensor:
+        return self.get_obs()["rgb"]
+
+    def get_params(self) -> dict:
+        return {}  # no camera intrinsics: the frame's geometry is fixed (tactile.constants)
