@@ -83,3 +83,20 @@ def test_rigid_twin_deformation_is_small_against_the_tolerance():
     # Negligible against the tolerance even beyond the envelope: R_t stays below 1/2.
     assert rec["peak_deformation"] < 0.5 * card.tau_o
     assert P.REPEATS >= 2
+
+
+def test_malformed_cards_are_refused_with_the_file_name(tmp_path):
+    import json
+
+    from mani_skill_softvt.calibration.cards import CalibrationCard, card_path
+
+    good = load_calibration_card("soft_stw_cube_hq").data
+    for change, match in (({"tau_o": float("inf")}, "finite"), ({"tau_o": 0.0}, "positive"),
+                          ({"g_min": 0.9, "g_max": 0.4}, "g_min <= g_max"), ({"g_max": 1.5}, "g_max <= 1"),
+                          ({"g_min": "0.4"}, "finite number"), ({"asset_id": "soft_pastry001"}, "expected")):
+        path = card_path("soft_stw_cube_hq", tmp_path)
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(ValueError, match=match) as err:
+            load_calibration_card("soft_stw_cube_hq", tmp_path)
+        assert str(path) in str(err.value)
+    assert CalibrationCard.from_dict(good).sha256 == load_calibration_card("soft_stw_cube_hq").sha256

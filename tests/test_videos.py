@@ -70,7 +70,10 @@ def test_bad_inputs_are_named():
 
 def test_names_and_record_comparison():
     ep = {"suite": "object_soft", "task_id": 3, "condition": "mass_high", "seed": 50003000}
-    assert video_name("object_soft_ood_hold", ep) == "object_soft_ood_hold_task3_mass_high_50003000.mp4"
+    # One file per episode: any change of task, condition or seed gives another name.
+    names = {video_name("run", {**ep, **change}) for change in
+             ({}, {"task_id": 4}, {"condition": "id"}, {"seed": 50003001})}
+    assert len(names) == 4 and all(n.endswith(".mp4") for n in names)
     stored = {"deformation_trace": [0.0, 1e-4, 2e-4], "success": False, "dsr_success": False, "r_max": 0.02}
     same = {**stored, "tau_o": 0.01}
     assert compare_records(stored, same, capped=False) == []
