@@ -127,7 +127,11 @@ def main(argv=None) -> None:
         factory, name = make_policy_factory(args.policy)
     except ValueError as e:
         ap.error(str(e))
-    with build_server(factory, name, args.host, args.port) as server:
+    try:
+        server = build_server(factory, name, args.host, args.port)
+    except OSError as e:  # port taken, address not local
+        ap.error(f"cannot listen on {args.host}:{args.port}: {e}; choose another --port (0: any free one)")
+    with server:
         host, port = server.socket.getsockname()[:2]
         print(f"serving policy {name} on ws://{host}:{port}", flush=True)
         try:
