@@ -119,9 +119,13 @@ BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPo
 
 
 def load_policy(spec: str) -> Policy:
-    """A built-in policy name or ``module:Class`` of a user policy (constructed without arguments)."""
+    """A built-in policy name, ``module:Class`` of a user policy (constructed without arguments) or
+    ``ws://HOST:PORT`` of a policy server."""
     if spec in BUILTIN:
         return BUILTIN[spec]()
+    if spec.startswith(("ws://", "wss://")):  # a policy server (openpi protocol), see evaluation/remote.py
+        from .remote import remote_policy_from_spec
+        return remote_policy_from_spec(spec)
     if ":" not in spec:
         raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}) nor of the form module:Class")
     module, cls = spec.split(":", 1)

@@ -1,0 +1,144 @@
+"""Serve a project policy over openpi's websocket protocol, for ``--policy ws://HOST:PORT``.
+
+    python -m mani_skill_softvt.serve random --port 8000                  # a built-in policy
+    python -m mani_skill_softvt.serve mypkg.policies:MyPolicy --port 8000 --host 0.0.0.0
+
+The counterpart of :class:`mani_skill_softvt.evaluation.remote.WebsocketPolicy` (the protocol
+and the observation schema are documented there): the policy runs in this process, e.g. on a GPU
+machine, while the evaluator steps the env elsewhere. On connect the server sends its metadata;
+each request is turned back into the observation dict the env produces (``agent/qpos``,
+``extra/tcp_pose``, both cameras, tactile when sent, ``instruction``; as batched torch tensors),
+so the policy computes bit for bit the actions it computes in process. ``episode/reset`` (and the
+first request of a connection) calls ``reset(prompt, episode/seed)``. A policy exception is
+answered with its traceback (a string, openpi's convention) and the server keeps serving.
+
+Each connection gets its own policy instance, so parallel evaluation workers do not share
+episode state. Privileged policies (the scripted expert) need the env and cannot be served.
+Binds to 127.0.0.1 unless ``--host`` says otherwise: the protocol has no authentication.
+"""
+
+from __future__ import annotations
+
+import argparse
+import traceback
+
+import numpy as np
+
+from . import __version__
+from .evaluation.policies import BUILTIN, load_policy
+from .evaluation.remote import ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, TACTILE_MARKERS, TACTILE_SIDES
+
+DEFAULT_PORT = 8000  # openpi's default
+
+
+def _batched(x, dtype=None):
+    """A numpy array from the wire as the env's batched (1, ...) torch tensor (a writable copy)."""
+    import torch
+
+    return torch.from_numpy(np.array(x, dtype=dtype)[None])
+
+
+def from_openpi_observation(request: dict) -> tuple[dict, str]:
+    """The env-style observation dict and the instruction of an openpi request (inverse of
+    :func:`~mani_skill_softvt.evaluation.remote.to_openpi_observation` on the keys it sends)."""
+    needed = [*CAMERAS, "observation/qpos", "observation/tcp_pose_world", "prompt"]
+    missing = [k for k in needed if k not in request]
+    if missing:
+        raise KeyError(f"request lacks {missing}: a project policy needs the lossless keys that "
+                       "mani_skill_softvt.evaluation.remote.WebsocketPolicy sends")
+    instruction = str(request["prompt"])
+    obs = {"agent": {"qpos": _batched(request["observation/qpos"], np.float32)},
+           "extra": {"tcp_pose": _batched(request["observation/tcp_pose_world"], np.float32)},
+           "sensor_data": {cam: {"rgb": _batched(request[key], np.uint8)} for key, cam in CAMERAS.items()},
+           "instruction": instruction}
+    if f"observation/tactile_{TACTILE_SIDES[0]}" in request:
+        obs["tactile"] = {side: {"rgb": _batched(request[f"observation/tactile_{side}"], np.uint8),
+                                 **{env_key: _batched(request[f"observation/tactile_{side}_{name}"], np.float32)
+                                    for name, env_key in TACTILE_MARKERS.items()}}
+                          for side in TACTILE_SIDES}
+    return obs, instruction
+
+
+def make_policy_factory(spec: str):
+    """A zero-argument constructor of the policy ``spec``; ValueError for privileged policies."""
+    if spec in BUILTIN and BUILTIN[spec].privileged:
+        raise ValueError(f"policy '{spec}' is privileged (it plans on the env's simulator state) and cannot be "
+                         f"served; serve an observation-only policy: "
+                         f"{sorted(k for k, c in BUILTIN.items() if not c.privileged)} or module:Class")
+    probe = load_policy(spec)  # fails now, not on the first connection
+    if getattr(probe, "privileged", False):
+        raise ValueError(f"policy '{spec}' is privileged (it needs the env) and cannot be served")
+    return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
+
+
+def _chunk(policy, obs: dict) -> np.ndarray:
+    """The policy's action chunk as the (k, 7) float32 array sent back; ValueError for another shape."""
+    actions = np.asarray(policy.act(obs), dtype=np.float32)
+    if actions.ndim != 2 or actions.shape[1] != ACTION_DIM or actions.shape[0] < 1:
+        raise ValueError(f"policy {getattr(policy, 'name', policy)} returned actions of shape {actions.shape}, "
+                         f"expected (k, {ACTION_DIM})")
+    return actions
+
+
+def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int = DEFAULT_PORT):
+    """A websockets sync server (not yet serving: call ``serve_forever``; ``shutdown`` stops it)."""
+    import websockets.sync.server
+    from openpi_client import msgpack_numpy
+    from websockets.exceptions import ConnectionClosed
+
+    metadata = {"policy": name, "server": "mani_skill_softvt.serve", "package_version": __version__,
+                "action_space": "pd_ee_pose: (k, 7) TCP xyz in the robot base frame, axis-angle, gripper closure",
+                "episode_keys": [EPISODE_RESET, EPISODE_SEED]}
+
+    def handler(conn) -> None:
+        policy = policy_factory()
+        started = False
+        try:
+            conn.send(msgpack_numpy.packb(metadata))
+            for message in conn:
+                try:
+                    request = msgpack_numpy.unpackb(message)
+                    obs, instruction = from_openpi_observation(request)
+                    if request.get(EPISODE_RESET) or not started:  # a client that never says so gets one reset
+                        policy.reset(instruction, int(request.get(EPISODE_SEED, 0)))
+                        started = True
+                    actions = _chunk(policy, obs)
+                except Exception:  # the client gets the traceback; the next request is served
+                    conn.send(traceback.format_exc())
+                    continue
+                conn.send(msgpack_numpy.packb({"actions": actions}))
+        except ConnectionClosed:  # the client went away: nothing to answer
+            pass
+
+    return websockets.sync.server.serve(handler, host, port, compression=None, max_size=None)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.serve", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("policy", help=f"a built-in policy ({', '.join(k for k, c in BUILTIN.items() if not c.privileged)}) "
+                                   "or module:Class (constructed without arguments)")
+    ap.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0: any free port, printed)")
+    ap.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for every interface)")
+    args = ap.parse_args(argv)
+    if not 0 <= args.port <= 65535:
+        ap.error(f"--port must be in [0, 65535], got {args.port}")
+    try:
+        factory, name = make_policy_factory(args.policy)
+    except ValueError as e:
+        ap.error(str(e))
+    try:
+        server = build_server(factory, name, args.host, args.port)
+    except OSError as e:  # port taken, address not local
+        ap.error(f"cannot listen on {args.host}:{args.port}: {e}; choose another --port (0: any free one)")
+    with server:
+        host, port = server.socket.getsockname()[:2]
+        print(f"serving policy {name} on ws://{host}:{port}", flush=True)
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:
+            pass
+
+
+if __name__ == "__main__":
+    main()
