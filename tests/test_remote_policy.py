@@ -17,7 +17,7 @@ import torch
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.evaluation.policies import HoldPolicy, RandomPolicy, _tcp_action, load_policy
 from mani_skill_softvt.evaluation.remote import RemotePolicyError, WebsocketPolicy, to_openpi_observation
-from mani_skill_softvt.expert.planner import quat_to_rotvec
+from mani_skill_softvt.physics.transforms import quat_to_rotvec
 from mani_skill_softvt.serve import build_server, main, make_policy_factory
 from mani_skill_softvt.tasks import constants as C
 

@@ -45,7 +45,7 @@ from openpi_client import msgpack_numpy
 from openpi_client.websocket_client_policy import WebsocketClientPolicy
 from websockets.exceptions import ConnectionClosed
 
-from ..expert.planner import quat_to_rotvec
+from ..physics.transforms import quat_to_rotvec
 from ..tasks import constants as C
 from .policies import Policy
 
