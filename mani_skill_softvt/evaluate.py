@@ -26,7 +26,10 @@ def main(argv=None) -> dict:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     ap.add_argument("--protocol", default="id", choices=["id", "ood"])
-    ap.add_argument("--policy", default="expert", help="expert | hold | random | module:Class")
+    ap.add_argument("--policy", default="expert",
+                    help="expert | expert_cartesian | hold | random | module:Class (imports and runs that code "
+                         "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "
+                         "needs --obs-mode rgb or rgb+tactile)")
     ap.add_argument("--tasks", nargs="+", default=[str(t) for t in DEFAULT_TASKS], help="task ids, or 'all'")
     ap.add_argument("--episodes-per-task", type=int, default=1)
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
@@ -61,6 +64,8 @@ def main(argv=None) -> dict:
     from .evaluation.protocols import episodes
     from .evaluation.runner import evaluate
 
+    if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
+        print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
     eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
     policy_tag = args.policy.replace(":", "_").replace(".", "_")
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"

@@ -25,7 +25,7 @@ import traceback
 import numpy as np
 
 from . import __version__
-from .evaluation.policies import BUILTIN, load_policy
+from .evaluation.policies import BUILTIN, ScriptedExpertPolicy, load_policy
 from .evaluation.remote import ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, TACTILE_MARKERS, TACTILE_SIDES
 
 DEFAULT_PORT = 8000  # openpi's default
@@ -59,14 +59,18 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
     return obs, instruction
 
 
+def _servable() -> list[str]:
+    """Built-in policies that read observations only (the scripted experts need the env)."""
+    return [k for k, c in BUILTIN.items() if not issubclass(c, ScriptedExpertPolicy)]
+
+
 def make_policy_factory(spec: str):
     """A zero-argument constructor of the policy ``spec``; ValueError for privileged policies."""
-    if spec in BUILTIN and BUILTIN[spec].privileged:
+    if spec in BUILTIN and issubclass(BUILTIN[spec], ScriptedExpertPolicy):
         raise ValueError(f"policy '{spec}' is privileged (it plans on the env's simulator state) and cannot be "
-                         f"served; serve an observation-only policy: "
-                         f"{sorted(k for k, c in BUILTIN.items() if not c.privileged)} or module:Class")
+                         f"served; serve an observation-only policy: {', '.join(_servable())} or module:Class")
     probe = load_policy(spec)  # fails now, not on the first connection
-    if getattr(probe, "privileged", False):
+    if isinstance(probe, ScriptedExpertPolicy):
         raise ValueError(f"policy '{spec}' is privileged (it needs the env) and cannot be served")
     return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
 
@@ -116,7 +120,7 @@ def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int =
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.serve", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("policy", help=f"a built-in policy ({', '.join(k for k, c in BUILTIN.items() if not c.privileged)}) "
+    ap.add_argument("policy", help=f"a built-in policy ({', '.join(_servable())}) "
                                    "or module:Class (constructed without arguments)")
     ap.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0: any free port, printed)")
     ap.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for every interface)")

@@ -122,8 +122,21 @@ def test_invalid_actions_raise_and_leave_the_state_untouched(env):
     for bad in (np.zeros(6, np.float32), np.full(7, np.nan, np.float32), np.array([0, 0, 0.1, np.pi, 0, 0, np.inf], np.float32)):
         with pytest.raises(ValueError, match="action"):
             env.step(bad)
+    for bad in ("close the gripper", np.array([None] * 7, dtype=object)):
+        with pytest.raises(ValueError, match="action must be numbers"):
+            env.step(bad)
     assert u.elapsed_steps.item() == 0
     assert np.array_equal(u.get_state().numpy(), before.numpy())
+
+
+def test_an_action_given_as_a_list_steps_like_the_same_array(env):
+    action = ee_action(np.array([0.0, 0.0, 0.15]), 0.0)
+    env.reset(seed=4)
+    env.step(action)
+    from_array = env.unwrapped.get_state().clone()
+    env.reset(seed=4)
+    env.step(action.tolist())
+    assert np.array_equal(env.unwrapped.get_state().numpy(), from_array.numpy())
 
 
 def test_closure_and_binary_gripper_encodings():

@@ -165,6 +165,8 @@ def test_bad_reset_options_are_rejected(object_env):
         object_env.reset(seed=0, options={"ood": "gravity_x2"})
     with pytest.raises(ValueError, match="positive finite"):
         object_env.reset(seed=0, options={"mass_scale": -1.0})
+    with pytest.raises(ValueError, match="youngs_modulus_sacle"):  # a misspelled factor is not silently nominal
+        object_env.reset(seed=0, options={"youngs_modulus_sacle": 0.5})
 
 
 # --------------------------------------------------------------------------- no leaks

@@ -1,8 +1,9 @@
 """The policy interface of the evaluation and the built-in policies.
 
 A policy sees observations only: ``reset(instruction, seed)`` then ``act(obs) -> (k, 7)`` action
-chunks, each executed for up to ``replan_steps`` steps before the next call. A *privileged*
-policy (the scripted expert) is additionally bound to the env and is labelled as such in reports.
+chunks, each executed for up to ``replan_steps`` steps before the next call. Only the built-in
+scripted experts are privileged: the runner binds them to the env they plan on and labels their
+records so; every other policy (in process, or served over ``ws://``) never holds the env.
 """
 
 from __future__ import annotations
@@ -16,11 +17,9 @@ from ..tasks import constants as C
 
 
 class Policy:
-    privileged = False
-    name = "policy"
+    """What the evaluator calls: ``reset`` at each episode start, ``act`` for each action chunk."""
 
-    def bind(self, env) -> None:  # only privileged policies use the env
-        pass
+    name = "policy"
 
     def reset(self, instruction: str, seed: int) -> None:
         raise NotImplementedError
@@ -32,7 +31,6 @@ class Policy:
 class ScriptedExpertPolicy(Policy):
     """The scripted pick-and-place expert, closure drawn from the calibrated envelope (privileged)."""
 
-    privileged = True
     name = "scripted_expert"
 
     def __init__(self, chunk: int = 8, planner: str | None = None):
@@ -45,6 +43,7 @@ class ScriptedExpertPolicy(Policy):
         self.planner = planner
 
     def bind(self, env) -> None:
+        """The evaluator hands the built-in expert (and only it) the env it plans on."""
         self.env = env
 
     def reset(self, instruction: str, seed: int) -> None:

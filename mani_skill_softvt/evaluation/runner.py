@@ -35,13 +35,18 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None)
     obs, info = env.reset(seed=int(episode["seed"]), options=options)
     if on_step is not None:
         on_step(obs, info)
-    policy.bind(env)
+    from .policies import ScriptedExpertPolicy
+
+    # Only the built-in scripted experts read the simulator; the runner, not the policy, says so.
+    privileged = isinstance(policy, ScriptedExpertPolicy)
+    if privileged:
+        policy.bind(env)
     policy.reset(u.instruction, int(episode["seed"]))
     material = u.object_material(u.target_instance)
     receipt = {"youngs_modulus": float(material["youngs_modulus"]), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
-               "privileged": bool(getattr(policy, "privileged", False))}
+               "privileged": privileged}
     steps, done = 0, False
     t0 = time.perf_counter()
     while not done:

@@ -46,8 +46,10 @@ from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.sensor import finger_pad_frame
 from . import constants as C
 from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
-from .suites import PhysicalFactors, resolve_factors
+from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
 
+# Reset options: the episode's physical factors, and ManiSkill's own.
+RESET_OPTIONS = frozenset({"ood", *FACTOR_OPTIONS, "reconfigure", "env_idx", "reset_to_env_states"})
 TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plus both fingers' GelSight
 
 
@@ -316,14 +318,23 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ stepping
     def step(self, action):
-        self._validate_action(action)
-        return super().step(action)
+        return super().step(self._validate_action(action))
 
-    def _validate_action(self, action) -> None:
-        """Reject malformed actions before anything in the simulation changes."""
+    def reset(self, seed=None, options=None):
+        unknown = sorted(set(options or {}) - RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; SoftVT envs take {sorted(RESET_OPTIONS)}")
+        return super().reset(seed=seed, options=options)
+
+    def _validate_action(self, action):
+        """Reject malformed actions before anything in the simulation changes; return the action
+        as ManiSkill takes it (arrays and tensors unchanged, sequences of numbers as float32 arrays)."""
         if action is None or isinstance(action, dict):
-            return
+            return action
         a = np.asarray(to_numpy(action))
+        if a.dtype.kind not in "fiu":
+            raise ValueError(f"action must be numbers (7 floats: [x, y, z] position, [rx, ry, rz] axis-angle, "
+                             f"gripper), got {type(action).__name__} of dtype {a.dtype}")
         shape = self.single_action_space.shape
         if a.shape not in (shape, (1, *shape)):
             raise ValueError(
@@ -332,6 +343,7 @@ class SoftBodyEnv(BaseEnv):
             )
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or inf: {a.ravel().tolist()}")
+        return action if isinstance(action, (np.ndarray, torch.Tensor)) else a.astype(np.float32)
 
     def _before_simulation_step(self):
         self._coupling.before_sapien_step()
