@@ -141,7 +141,7 @@ class SoftBodyEnv(BaseEnv):
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
-        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_poses()[side])
+        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_pose(side))
                          for cfg in self._default_tactile_configs}
         if self.tactile_enabled:
             # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
@@ -386,21 +386,24 @@ class SoftBodyEnv(BaseEnv):
             offset += len(nodes)
         return np.concatenate(verts), np.concatenate(faces)
 
-    def pad_poses(self) -> dict[str, np.ndarray]:
-        """4x4 world pose of each finger's gel surface (tactile pad frame, see tactile.sensor)."""
-        links = {s: self.agent.robot.links_map[f"panda_{s}finger"].pose.to_transformation_matrix()[0].cpu().numpy()
-                 for s in ("left", "right")}
-        centre = {s: links[s][:3, :3] @ np.asarray(C.FINGERTIP_OFFSET[s]) + links[s][:3, 3] for s in links}
+    def pad_pose(self, side: str) -> np.ndarray:
+        """4x4 world pose of the ``side`` finger's gel surface (tactile pad frame, see tactile.sensor)."""
+        other = {"left": "right", "right": "left"}[side]
+        centre = {}
+        for s in (side, other):
+            link = self.agent.robot.links_map[f"panda_{s}finger"].pose.to_transformation_matrix()[0].cpu().numpy()
+            centre[s] = link[:3, :3] @ np.asarray(C.FINGERTIP_OFFSET[s]) + link[:3, 3]
         hand = self.agent.robot.links_map["panda_hand"].pose.to_transformation_matrix()[0].cpu().numpy()
-        out = {}
-        for side, other in (("left", "right"), ("right", "left")):
-            normal = centre[other] - centre[side]
-            normal /= np.linalg.norm(normal)
-            # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
-            # contact radius) plus the tactile contact margin.
-            face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS + C.TACTILE_CONTACT_MARGIN)
-            out[side] = finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
-        return out
+        normal = centre[other] - centre[side]
+        normal /= np.linalg.norm(normal)
+        # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
+        # contact radius) plus the tactile contact margin.
+        face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS + C.TACTILE_CONTACT_MARGIN)
+        return finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
+
+    def pad_poses(self) -> dict[str, np.ndarray]:
+        """Both fingers' pad poses: side -> 4x4 world pose."""
+        return {side: self.pad_pose(side) for side in ("left", "right")}
 
     def tactile_frames(self) -> dict:
         """GelSight frames of both fingers for the current state (side -> TactileFrame), in any obs mode."""
