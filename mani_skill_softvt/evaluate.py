@@ -14,6 +14,7 @@ another calibration percentile using the cards' sweep records: no new rollouts.
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from .tasks.suites import NUM_TASKS, SUITES
@@ -59,6 +60,8 @@ def main(argv=None) -> dict:
     if args.video and args.obs_mode in ("state", "none") and args.policy != "expert":
         ap.error(f"--video re-runs episodes with dict observations (rgb+tactile), which a policy evaluated in "
                  f"obs mode '{args.obs_mode}' does not read; evaluate with state_dict, rgb or rgb+tactile")
+    if args.policy.startswith(("ws://", "wss://")) and not args.obs_mode.startswith("rgb"):
+        ap.error(f"a policy server gets camera images: use --obs-mode rgb or rgb+tactile, not '{args.obs_mode}'")
     from tqdm import tqdm
 
     from .evaluation.protocols import episodes
@@ -67,21 +70,26 @@ def main(argv=None) -> dict:
     if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
         print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
     eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
-    policy_tag = args.policy.replace(":", "_").replace(".", "_")
+    policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", args.policy).strip("_")  # a file name, also for ws://host:port
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
     records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
                        progress=bar.update, ray_address=args.ray)
     bar.close()
+    failed = [r for r in records if r["termination"] in ("policy_error", "worker_died")]
+    if failed:
+        print(f"{len(failed)} episode(s) ended in an error, recorded as failures; the first: {failed[0]['error']}")
     md, _ = write_report(records, args.out, stem)
     plot_traces(records, args.out / f"{stem}_traces.png")
     if args.protocol == "ood":
         from .evaluation.report import plot_ood_curves
 
-        id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
-        from .fileio import read_jsonl
+        from .evaluation.runner import read_records
 
-        plot_ood_curves(records, read_jsonl(id_file), args.out / f"{stem}_ood.png")
+        id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
+        same = {"policy": args.policy, "obs_mode": args.obs_mode, "control_mode": args.control_mode}
+        id_records = [r for r in read_records(id_file) if all(r.get(k) == v for k, v in same.items())]
+        plot_ood_curves(records, id_records, args.out / f"{stem}_ood.png")
     print(md.read_text())
     if records and records[0]["receipt"]["privileged"]:
         print("(policy is privileged: it reads the simulator state)")
@@ -95,12 +103,14 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
     from .calibration.cards import load_calibration_card
     from .evaluation.metrics import rescore_record
     from .evaluation.report import write_report
-    from .fileio import read_jsonl
+    from .evaluation.runner import read_records
     from .tasks.suites import task_spec
 
     if percentile is None:
         raise SystemExit("--rescore needs --percentile")
-    records = read_jsonl(path)
+    if not Path(path).exists():
+        raise SystemExit(f"--rescore: {path} does not exist")
+    records = read_records(path)  # every record verified against its hash
     if not records:
         raise SystemExit(f"no records in {path}")
     new = []

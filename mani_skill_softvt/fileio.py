@@ -31,14 +31,21 @@ def atomic_write_json(path: Path, data) -> None:
     atomic_write(path, lambda p: p.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n"))
 
 
+class CorruptLogError(ValueError):
+    """A line of a JSONL log that is not JSON and is not a torn last line."""
+
+
 def append_jsonl(path: Path, record: dict) -> None:
     """Append one record as a line and flush it to disk (resumable logs)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # A run killed mid-write leaves a torn last line: end it first, so the new record stands alone.
-    torn = path.exists() and path.stat().st_size > 0 and _last_byte(path) != b"\n"
-    with open(path, "a") as f:
-        f.write(("\n" if torn else "") + json.dumps(record, sort_keys=True) + "\n")
+    # A writer killed mid-line leaves a torn last line: cut it off first, so that it neither
+    # glues onto the new record nor stays behind as a corrupt line in the middle of the log.
+    with open(path, "ab") as f:
+        size = f.seek(0, os.SEEK_END)
+        if size and _last_byte(path) != b"\n":
+            f.truncate(_torn_line_start(path))
+        f.write((json.dumps(record, sort_keys=True) + "\n").encode())
         f.flush()
         os.fsync(f.fileno())
 
@@ -49,15 +56,41 @@ def _last_byte(path: Path) -> bytes:
         return f.read(1)
 
 
-def read_jsonl(path: Path) -> list[dict]:
-    """Records of a JSONL log; a torn last line (killed mid-write) is dropped, never misread."""
+def _torn_line_start(path: Path) -> int:
+    """Offset just past the last newline (0 if none): where a torn last line begins."""
+    data = Path(path).read_bytes()
+    return data.rfind(b"\n") + 1
+
+
+def read_jsonl_lines(path: Path) -> list[tuple[int, object]]:
+    """(line number, value) of each line of a JSONL log; [] if the file does not exist.
+
+    A last line without its newline that does not parse is a record torn by a killed writer: it
+    is dropped (its episode or trial simply runs again). Any other line that does not parse is
+    corruption and raises :class:`CorruptLogError` naming the file and line.
+    """
     path = Path(path)
     if not path.exists():
         return []
+    text = path.read_text()
+    lines = text.split("\n")
+    complete = lines[:-1]  # every line that ended with a newline; lines[-1] is "" or a torn tail
     out = []
-    for line in path.read_text().splitlines():
+    for i, line in enumerate(complete, start=1):
         try:
-            out.append(json.loads(line))
+            out.append((i, json.loads(line)))
+        except json.JSONDecodeError as e:
+            raise CorruptLogError(f"{path}:{i}: not a JSON record ({e.msg}); the file is corrupt: "
+                                  "remove or repair that line, then re-run") from None
+    if lines[-1]:
+        try:
+            out.append((len(lines), json.loads(lines[-1])))
         except json.JSONDecodeError:
-            continue
+            pass  # torn by a killed writer
     return out
+
+
+def read_jsonl(path: Path) -> list[dict]:
+    """Records of a JSONL log (see :func:`read_jsonl_lines`: a torn last line is dropped, a
+    corrupt line elsewhere raises with its file and line)."""
+    return [rec for _, rec in read_jsonl_lines(path)]

@@ -42,10 +42,20 @@ def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tup
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def summarize(records: list[dict]) -> dict:
-    """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals.
+def tolerance_violated(record: dict) -> bool:
+    """The episode deformed its object beyond tolerance: R_max > 1 on a deformable suite, or the
+    FEM blew up (``sim_unstable``: crushed or torn, whatever R_max was before)."""
+    if record.get("termination") == "sim_unstable":
+        return True
+    return not record.get("rigid") and record.get("r_max") is not None and float(record["r_max"]) > 1.0
 
-    ``records`` need ``success`` and ``r_max`` (rigid suites: ``dsr_success`` given explicitly).
+
+def summarize(records: list[dict]) -> dict:
+    """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals; how the
+    episodes ended (``terminations``) and how many violated their tolerance.
+
+    ``records`` need ``success`` and ``r_max`` (rigid suites: ``dsr_success`` given explicitly;
+    ``r_max`` None: not measured, e.g. a worker died).
     """
     n = len(records)
     t = sum(bool(r["success"]) for r in records)
@@ -53,11 +63,17 @@ def summarize(records: list[dict]) -> dict:
     if d > t:
         raise AssertionError("DSR exceeds TSR: a deformation-aware success must be a task success")
     tsr, dsr = (t / n, d / n) if n else (0.0, 0.0)
+    measured = [r["r_max"] for r in records if r.get("r_max") is not None]
+    terminations = defaultdict(int)
+    for r in records:
+        terminations[r.get("termination") or "unrecorded"] += 1
     return {
         "episodes": n, "task_successes": t, "dsr_successes": d,
         "tsr": tsr, "tsr_ci95": wilson_interval(t, n), "dsr": dsr, "dsr_ci95": wilson_interval(d, n),
         "gap": tsr - dsr, "gap_share_of_successes": (t - d) / t if t else 0.0,
-        "r_max_median": float(np.median([r["r_max"] for r in records])) if n else float("nan"),
+        "r_max_median": float(np.median(measured)) if measured else float("nan"),
+        "tolerance_violations": sum(tolerance_violated(r) for r in records),
+        "terminations": dict(sorted(terminations.items())),
     }
 
 
@@ -70,7 +86,12 @@ def group_summaries(records: list[dict], keys: tuple[str, ...]) -> dict:
 
 
 def rescore_record(record: dict, tau_new: float) -> dict:
-    """The record scored against another tolerance, from its stored D_t trace (no rollout)."""
+    """The record scored against another tolerance, from its stored D_t trace (no rollout).
+
+    Success and termination are kept (a blown-up FEM stays a failure); a record with nothing
+    measured (``r_max`` None) keeps ``r_max`` None."""
+    if record.get("r_max") is None:
+        return dict(record, tau_o=tau_new)
     peak = r_max(deformation_ratio(record["deformation_trace"], tau_new))
     out = dict(record, tau_o=tau_new, r_max=peak)
     out["dsr_success"] = record["success"] if record.get("rigid") else dsr_success(record["success"], peak)

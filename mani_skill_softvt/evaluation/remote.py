@@ -150,7 +150,9 @@ class _BoundedClient(WebsocketClientPolicy):
 class WebsocketPolicy(Policy):
     """A policy served over openpi's websocket protocol at ``url`` (``ws://HOST:PORT``).
 
-    Connects on construction (the server's metadata is in :attr:`metadata`). Every failure (refused
+    Connects in :meth:`reset` (the server's metadata is then in :attr:`metadata`), not on
+    construction, so that an unreachable server fails each episode as a ``policy_error`` record
+    instead of the whole evaluation, and a server that comes back is used again. Every failure (refused
     connection, handshake or metadata slower than ``connect_timeout``, no reply within
     ``reply_timeout``, a dropped connection, a traceback or a malformed reply) raises
     :class:`RemotePolicyError` naming the URL. After a transport failure the connection is closed
@@ -165,8 +167,8 @@ class WebsocketPolicy(Policy):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
         self.url, self.connect_timeout, self.reply_timeout = url, float(connect_timeout), float(reply_timeout)
-        self._client = None
-        self._connect()
+        self._client, self.metadata = None, None
+        self.name = f"remote[?]@{url}"  # the served policy's name once connected
         self._instruction, self._seed, self._new_episode = "", 0, True
 
     def _connect(self) -> None:
@@ -188,14 +190,14 @@ class WebsocketPolicy(Policy):
             self._client = None
 
     def reset(self, instruction: str, seed: int) -> None:
-        if self._client is None:  # the last episode lost the connection
+        if self._client is None:  # first episode, or the last one lost the connection
             self._connect()
         self._instruction, self._seed, self._new_episode = instruction, int(seed), True
 
     def act(self, obs) -> np.ndarray:
         if self._client is None:
-            raise RemotePolicyError(f"the connection to the policy server at {self.url} was lost earlier in this "
-                                    "episode; reset() reconnects")
+            raise RemotePolicyError(f"not connected to the policy server at {self.url}: the connection was lost "
+                                    "earlier in this episode, or reset() was not called; reset() connects")
         request = to_openpi_observation(obs, self._instruction)
         request.update({EPISODE_RESET: self._new_episode, EPISODE_SEED: self._seed})
         try:
@@ -213,7 +215,7 @@ class WebsocketPolicy(Policy):
 
 
 def remote_policy_from_spec(spec: str) -> WebsocketPolicy:
-    """``ws://HOST:PORT[?connect_timeout=S&reply_timeout=S]`` as a connected :class:`WebsocketPolicy`.
+    """``ws://HOST:PORT[?connect_timeout=S&reply_timeout=S]`` as a :class:`WebsocketPolicy`.
 
     The query is read here and not sent to the server. ``policies.load_policy`` hands every
     ``ws://`` / ``wss://`` spec to this function.

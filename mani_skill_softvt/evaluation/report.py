@@ -27,6 +27,17 @@ HEADER = ("| group | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR | shar
           "|---|---|---|---|---|---|---|")
 
 
+def _termination_table(per_suite: dict) -> list[str]:
+    from .runner import TERMINATIONS
+
+    cols = list(TERMINATIONS) + sorted({k for s in per_suite.values() for k in s["terminations"]} - set(TERMINATIONS))
+    lines = ["| group | " + " | ".join(cols) + " | tolerance violations |", "|---" * (len(cols) + 2) + "|"]
+    for label, s in per_suite.items():
+        counts = [str(s["terminations"].get(c, 0)) for c in cols]
+        lines.append(f"| {label} | " + " | ".join(counts) + f" | {s['tolerance_violations']} |")
+    return lines
+
+
 def build_report(records: list[dict]) -> tuple[str, dict]:
     """Markdown text and a JSON-able dict: overall, per suite, per task, per OOD condition."""
     data = {"overall": summarize(records),
@@ -35,6 +46,7 @@ def build_report(records: list[dict]) -> tuple[str, dict]:
             "per_condition": {f"{k[0]}/{k[1]}": v for k, v in group_summaries(records, ("suite", "condition")).items()}}
     lines = ["## Overall", HEADER, _row("all", data["overall"]), "", "## Per suite", HEADER]
     lines += [_row(k, v) for k, v in data["per_suite"].items()]
+    lines += ["", "## How episodes ended", *_termination_table({"all": data["overall"], **data["per_suite"]})]
     lines += ["", "## Per task", HEADER] + [_row(k, v) for k, v in data["per_task"].items()]
     if len(data["per_condition"]) > len(data["per_suite"]):
         lines += ["", "## Per condition", HEADER] + [_row(k, v) for k, v in data["per_condition"].items()]
@@ -58,6 +70,8 @@ def plot_traces(records: list[dict], out: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
     for r in records:
+        if not r["deformation_trace"]:  # nothing measured (a worker died)
+            continue
         t = np.arange(len(r["deformation_trace"])) / 20.0
         rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
         color = "tab:green" if r["dsr_success"] else ("tab:red" if r["success"] else "0.6")

@@ -1,9 +1,24 @@
 """Closed-loop evaluation: run episodes, write one audited record per episode, resume.
 
-Records go to a JSONL file, one line per finished episode, written by the main process only;
-a re-run skips the episodes already there, so an interrupted evaluation neither repeats nor
-loses an episode. Episodes run in worker processes, or as Ray tasks with ``ray_address``
-(one env per (suite, task) batch either way; see :mod:`mani_skill_softvt.parallel`).
+Every episode ends in a record, whatever the policy does; its ``termination`` says how:
+
+- ``success``: the task's success predicate held (the env ended the episode);
+- ``dropped``: the object fell (the env's failure predicate ended the episode);
+- ``timeout``: the step limit came first;
+- ``sim_unstable``: the FEM left its valid range (the object was crushed or torn). Scored as a
+  task failure and a tolerance violation; ``r_max`` is the peak up to the blow-up;
+- ``policy_error``: the policy raised, returned malformed actions (not numbers, wrong shape,
+  NaN), or its server refused or dropped the connection; ``error`` holds the message;
+- ``worker_died``: the process running the episode died (out of memory, a crash in native
+  code, a kill); ``error`` says how. Nothing of the episode survives, so ``r_max`` is ``None``.
+
+Records go to a JSONL file, one line per finished episode, written by the main process only.
+Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``) and
+``record_sha256``, a hash of everything but the wall time. A re-run with the same configuration
+skips the episodes already there, after verifying every line, so an interrupted evaluation
+neither repeats nor loses an episode and an edited or corrupt record is refused with its file
+and line. Episodes run in worker processes, or as Ray tasks with ``ray_address`` (one env per
+(suite, task) batch either way; see :mod:`mani_skill_softvt.parallel`).
 """
 
 from __future__ import annotations
@@ -14,58 +29,137 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
-from ..fileio import append_jsonl, read_jsonl
-from ..parallel import run_tasks
+from ..fileio import append_jsonl, read_jsonl_lines
+from ..parallel import WorkerDiedError, run_tasks
+from ..physics.fem import SimulationInstabilityError
 from .protocols import episode_key
+
+TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
+CONFIG_KEYS = ("policy", "obs_mode", "control_mode")
+UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
+MAX_ERROR_CHARS = 2000
+
+
+class RecordIntegrityError(ValueError):
+    """A stored record that is not what the evaluator wrote (edited, corrupt, or not a record)."""
 
 
 def record_hash(record: dict) -> str:
-    body = {k: v for k, v in record.items() if k != "record_sha256"}
+    """SHA-256 of the record without its hash and wall time (canonical JSON)."""
+    body = {k: v for k, v in record.items() if k not in UNHASHED}
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
-def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None) -> dict:
+def read_records(path: Path) -> list[dict]:
+    """The records of an evaluation log, each verified against its ``record_sha256``.
+
+    A torn last line (a writer killed mid-line) is dropped, as :func:`~mani_skill_softvt.fileio.read_jsonl_lines`
+    does; any other bad line raises :class:`RecordIntegrityError` naming the file and line.
+    """
+    out = []
+    for lineno, rec in read_jsonl_lines(path):
+        where = f"{path}:{lineno}"
+        if not isinstance(rec, dict) or "record_sha256" not in rec:
+            raise RecordIntegrityError(f"{where}: not an evaluation record (no record_sha256); "
+                                       "remove the line, or evaluate into another --out")
+        if rec["record_sha256"] != record_hash(rec):
+            raise RecordIntegrityError(f"{where}: the record does not match its record_sha256 (edited or corrupt); "
+                                       "remove the line to re-run that episode")
+        out.append(rec)
+    return out
+
+
+def _seal(rec: dict) -> dict:
+    rec["record_sha256"] = record_hash(rec)
+    return rec
+
+
+def _error_text(e: BaseException, where: str) -> str:
+    text = f"{type(e).__name__} in {where}: {e}"
+    return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS] + " [...]"
+
+
+def _action_chunk(raw, env, replan_steps: int) -> list:
+    """The actions of a chunk that will be executed, each validated by the env (numbers, shape, finite)."""
+    from mani_skill.utils.common import to_numpy
+
+    chunk = np.asarray(to_numpy(raw)) if not isinstance(raw, (list, tuple)) else np.asarray(raw)
+    if chunk.ndim == 1:
+        chunk = chunk[None]
+    if chunk.ndim != 2 or len(chunk) == 0:
+        raise ValueError(f"act() must return an action (7,) or a chunk (k, 7) with k >= 1, got shape {chunk.shape}")
+    return [env.validate_action(a) for a in chunk[:replan_steps]]
+
+
+def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None) -> dict:
     """One episode of ``policy`` on a DSR-wrapped env; the record with its audit receipt.
 
+    Never raises for what the policy does (see the module docstring for the terminations).
     ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
+    ``policy_spec`` is how the policy was named to the evaluator (default: its ``name``).
     """
-    u = env.unwrapped
-    options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
-    obs, info = env.reset(seed=int(episode["seed"]), options=options)
-    if on_step is not None:
-        on_step(obs, info)
     from .policies import ScriptedExpertPolicy
 
+    u = env.unwrapped
+    seed = int(episode["seed"])
+    options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
+    obs, info = env.reset(seed=seed, options=options)
+    if on_step is not None:
+        on_step(obs, info)
     # Only the built-in scripted experts read the simulator; the runner, not the policy, says so.
     privileged = isinstance(policy, ScriptedExpertPolicy)
     if privileged:
         policy.bind(env)
-    policy.reset(u.instruction, int(episode["seed"]))
+    steps, termination, error = 0, None, None
+    t0 = time.perf_counter()
+    try:
+        policy.reset(u.instruction, seed)
+    except Exception as e:  # noqa: BLE001 - a failing policy is a result
+        termination, error = "policy_error", _error_text(e, "policy.reset()")
+    while termination is None:
+        try:
+            actions = _action_chunk(policy.act(obs), u, replan_steps)
+        except Exception as e:  # noqa: BLE001
+            termination, error = "policy_error", _error_text(e, "policy.act()")
+            break
+        for action in actions:
+            try:
+                obs, _, terminated, truncated, info = env.step(action)
+            except SimulationInstabilityError as e:
+                termination, error = "sim_unstable", str(e)
+                break
+            steps += 1
+            if on_step is not None:
+                on_step(obs, info)
+            if bool(terminated[0]) or bool(truncated[0]):
+                termination = "success" if info["task_success"] else "dropped" if bool(info["dropped"][0]) else "timeout"
+                break
     material = u.object_material(u.target_instance)
     receipt = {"youngs_modulus": float(material["youngs_modulus"]), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
                "privileged": privileged}
-    steps, done = 0, False
-    t0 = time.perf_counter()
-    while not done:
-        chunk = policy.act(obs)
-        for action in chunk[:replan_steps]:
-            obs, _, terminated, truncated, info = env.step(action)
-            steps += 1
-            if on_step is not None:
-                on_step(obs, info)
-            if bool(terminated[0]) or bool(truncated[0]):
-                done = True
-                break
+    success = termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
-           "success": bool(info["task_success"]), "dsr_success": bool(info["dsr_success"]),
-           "dropped": bool(info["dropped"][0]), "steps": steps, "r_max": float(info["r_max"]),
+           "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
+           "termination": termination, "error": error,
+           "success": success, "dsr_success": success and bool(info["dsr_success"]),
+           "dropped": bool(info["dropped"][0]), "steps": steps, "r_max": float(env.r_max),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
-    rec["record_sha256"] = record_hash({k: v for k, v in rec.items() if k != "wall_s"})
-    return rec
+    return _seal(rec)
+
+
+def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) -> dict:
+    """The record of an episode whose process died: a failure, nothing measured (``r_max`` None)."""
+    rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **config,
+           "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
+           "steps": None, "r_max": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
+           "receipt": {"package_version": __version__, "privileged": False}}
+    return _seal(rec)
 
 
 def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, queue) -> int:
@@ -73,10 +167,19 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
     from .wrapper import make_env
 
     policy = load_policy(policy_spec)
-    env = make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode)
+
+    def build():
+        return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode)
+
+    env = build()
     try:
         for ep in batch:
-            queue.put(run_episode(env, policy, ep))
+            queue.put(("start", ep))
+            rec = run_episode(env, policy, ep, policy_spec=policy_spec)
+            queue.put(("record", rec))
+            if rec["termination"] == "sim_unstable":  # start the next episode from a freshly built simulator
+                env.close()
+                env = build()
     finally:
         env.close()
     return len(batch)
@@ -86,23 +189,51 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
              control_mode: str = "pd_ee_pose", progress=None, ray_address: str | None = None) -> list[dict]:
     """Run the episodes not yet in ``out`` and return every record of the requested episodes.
 
+    Only records of the same configuration (policy, obs mode, control mode) count as done.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
+    from ..tasks.suites import get_suite
+
     out = Path(out)
-    done = {episode_key(r) for r in read_jsonl(out)}
-    todo = [ep for ep in episodes if episode_key(ep) not in done]
+    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode}
+
+    def ours() -> dict:
+        return {episode_key(r): r for r in read_records(out) if all(r.get(k) == v for k, v in config.items())}
+
+    todo = [ep for ep in episodes if episode_key(ep) not in ours()]
     if progress is not None:
         progress(len(episodes) - len(todo))
-    batches = defaultdict(list)
-    for ep in todo:
-        batches[(ep["suite"], ep["task_id"])].append(ep)
-    items = [(b, policy_spec, obs_mode, control_mode) for b in batches.values()]
-    for kind, rec in run_tasks(_worker, items, workers, ray_address):
-        if kind == "message":  # one finished episode: write it at once so a kill loses nothing
-            append_jsonl(out, rec)
+    # A dead worker takes its batch's later episodes with it: run the rest again. Every death
+    # records the episode it killed, so this ends.
+    while todo:
+        batches = defaultdict(list)
+        for ep in todo:
+            batches[(ep["suite"], ep["task_id"])].append(ep)
+        items = [(b, policy_spec, obs_mode, control_mode) for b in batches.values()]
+        in_flight, deaths = {}, 0
+        for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True):
+            if kind == "message":
+                tag, payload = value
+                key = (payload["suite"], payload["task_id"])
+                if tag == "start":
+                    in_flight[key] = payload
+                    continue
+                in_flight.pop(key, None)
+                append_jsonl(out, payload)  # written at once, so a kill loses nothing
+            elif kind == "died":
+                index, reason = value
+                batch = items[index][0]
+                ep = in_flight.pop((batch[0]["suite"], batch[0]["task_id"]), None)
+                if ep is None:  # died building its env: not an episode's doing, and would recur
+                    raise WorkerDiedError(index, f"{reason} before its first episode began")
+                append_jsonl(out, worker_died_record(ep, reason, config, get_suite(ep["suite"]).rigid))
+                deaths += 1
+            else:
+                continue
             if progress is not None:
                 progress(1)
-    wanted = {episode_key(ep) for ep in episodes}
-    records = {episode_key(r): r for r in read_jsonl(out) if episode_key(r) in wanted}
+        done = ours()
+        todo = [ep for ep in todo if episode_key(ep) not in done] if deaths else []
+    records = ours()
     return [records[episode_key(ep)] for ep in episodes if episode_key(ep) in records]

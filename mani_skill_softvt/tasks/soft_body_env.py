@@ -318,7 +318,7 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ stepping
     def step(self, action):
-        return super().step(self._validate_action(action))
+        return super().step(self.validate_action(action))
 
     def reset(self, seed=None, options=None):
         unknown = sorted(set(options or {}) - RESET_OPTIONS)
@@ -326,7 +326,7 @@ class SoftBodyEnv(BaseEnv):
             raise ValueError(f"unknown reset option(s) {unknown}; SoftVT envs take {sorted(RESET_OPTIONS)}")
         return super().reset(seed=seed, options=options)
 
-    def _validate_action(self, action):
+    def validate_action(self, action):
         """Reject malformed actions before anything in the simulation changes; return the action
         as ManiSkill takes it (arrays and tensors unchanged, sequences of numbers as float32 arrays)."""
         if action is None or isinstance(action, dict):

@@ -1,0 +1,163 @@
+"""Evaluation integrity: whatever a policy does ends in a scored, recorded episode and the run goes
+on; records are verified on resume and rescoring; a killed evaluator leaves no process behind."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from misbehaving_policies import BEHAVIOURS, CRUSH_TARGET_ENV, TASK, Crusher
+from mani_skill_softvt.data.seeds import id_seed
+from mani_skill_softvt.evaluation.metrics import summarize, tolerance_violated
+from mani_skill_softvt.evaluation.policies import HoldPolicy
+from mani_skill_softvt.evaluation.protocols import episodes
+from mani_skill_softvt.evaluation.runner import RecordIntegrityError, evaluate, record_hash, run_episode
+from mani_skill_softvt.fileio import CorruptLogError
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+REPO = Path(__file__).resolve().parents[1]
+SPEC = "misbehaving_policies:Misbehaving"
+SHORT_EPISODE = 40  # steps: enough for the crush (blow-up at ~34 steps) and a quick timeout
+
+
+@pytest.fixture(scope="module")
+def cube_env():
+    from mani_skill_softvt.evaluation.wrapper import make_env
+
+    env = make_env("object_soft", TASK, obs_mode="state_dict", control_mode="pd_ee_pose",
+                   max_episode_steps=SHORT_EPISODE)
+    yield env
+    env.close()
+
+
+def _episode(i: int) -> dict:
+    return {"suite": "object_soft", "task_id": TASK, "condition": "id", "seed": id_seed(TASK, i)}
+
+
+def _target_top(env, seed: int) -> np.ndarray:
+    """Where the object sits at this seed's initial state (centroid x, y and its top z)."""
+    u = env.unwrapped
+    env.reset(seed=seed)
+    nodes = u.soft_nodes(u.target_instance)
+    return np.array([*nodes[:, :2].mean(0), nodes[:, 2].max()])
+
+
+def test_crushing_is_scored_as_failure_and_violation_and_the_env_runs_on(cube_env):
+    ep = _episode(BEHAVIOURS.index("crush"))
+    rec = run_episode(cube_env, Crusher(_target_top(cube_env, ep["seed"])), ep)
+    assert rec["termination"] == "sim_unstable" and "tets" in rec["error"]
+    assert not rec["success"] and not rec["dsr_success"] and tolerance_violated(rec)
+    # R_max up to the blow-up is kept: the peak of the recorded D_t trace over tau_o.
+    assert rec["steps"] > 0 and len(rec["deformation_trace"]) == rec["steps"] + 1
+    assert rec["r_max"] == pytest.approx(max(rec["deformation_trace"]) / rec["tau_o"], rel=1e-12)
+    assert rec["record_sha256"] == record_hash(rec)
+    # The same env resets cleanly after a blow-up: holding still until the step limit is a timeout.
+    hold = run_episode(cube_env, HoldPolicy(), _episode(0))
+    assert hold["termination"] == "timeout" and hold["steps"] == SHORT_EPISODE and not hold["success"]
+    assert hold["r_max"] < 0.1  # nothing touched the object: only settling
+
+
+def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_path, monkeypatch):
+    crush_seed = id_seed(TASK, BEHAVIOURS.index("crush"))
+    monkeypatch.setenv(CRUSH_TARGET_ENV, ",".join(repr(float(v)) for v in _target_top(cube_env, crush_seed)))
+    eps = episodes("object_soft", "id", tasks=[TASK], per_task=len(BEHAVIOURS))
+    out = tmp_path / "misbehaving.jsonl"
+    records = evaluate(eps, SPEC, out)
+    assert [r["seed"] for r in records] == [e["seed"] for e in eps]
+    got = {b: r for b, r in zip(BEHAVIOURS, records)}
+    expected = {"raise_in_act": ("policy_error", "ZeroDivisionError in policy.act(): deliberate failure in act"),
+                "nan": ("policy_error", "NaN"), "wrong_shape": ("policy_error", "shape (6,)"),
+                "strings": ("policy_error", "must be numbers"), "kill_own_process": ("worker_died", "SIGKILL"),
+                "raise_in_reset": ("policy_error", "KeyError in policy.reset()"), "crush": ("sim_unstable", "tets")}
+    for b, (termination, message) in expected.items():
+        r = got[b]
+        assert r["termination"] == termination and message in r["error"], (b, r["termination"], r["error"])
+        assert not r["success"] and not r["dsr_success"]
+        assert (r["policy"], r["obs_mode"], r["control_mode"]) == (SPEC, "state_dict", "pd_ee_pose")
+        assert r["record_sha256"] == record_hash(r)
+    # Policies that behaved for two single-step chunks first: exactly two steps were executed.
+    assert got["raise_in_act"]["steps"] == got["nan"]["steps"] == 2 and got["raise_in_reset"]["steps"] == 0
+    assert got["kill_own_process"]["r_max"] is None  # nothing of a dead worker's episode survives
+    s = summarize(records)
+    assert s["terminations"] == {"policy_error": 5, "sim_unstable": 1, "worker_died": 1}
+    assert s["tolerance_violations"] == 1 and s["tsr"] == s["dsr"] == 0.0
+
+    # Resume: nothing re-runs; every line is verified.
+    ticks = []
+    assert evaluate(eps, SPEC, out, progress=ticks.append) == records and ticks == [len(eps)]
+    # Another control mode is another run: its records are not reused, and the first run's stay.
+    other = evaluate(eps[5:6], SPEC, out, control_mode="pd_ee_pose_binary")
+    assert other[0]["control_mode"] == "pd_ee_pose_binary" and other[0]["termination"] == "policy_error"
+    assert evaluate(eps, SPEC, out) == records
+
+    lines = out.read_text().splitlines()
+    tampered = json.loads(lines[1])
+    tampered["r_max"] = 0.0
+    for bad, error, where in ((json.dumps(tampered), RecordIntegrityError, f"{out}:2:"),
+                              ('{"suite": "object_so', CorruptLogError, f"{out}:2:")):
+        out.write_text("\n".join([lines[0], bad, *lines[2:]]) + "\n")
+        with pytest.raises(error, match=where):
+            evaluate(eps, SPEC, out)
+        from mani_skill_softvt.evaluate import main
+
+        with pytest.raises(error, match=where):
+            main(["--rescore", str(out), "--percentile", "80", "--out", str(tmp_path)])
+    # A torn last line (killed writer) is still recovered: the records before it stand.
+    out.write_text("\n".join(lines) + '\n{"suite": "obj')
+    assert evaluate(eps, SPEC, out) == records
+
+
+def _descendants(pid: int) -> set[int]:
+    children = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "mani_skill_softvt.evaluate", "--policy", "hold", "--tasks", "3",
+                             "--out", str(tmp_path)], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        workers = set()
+        while not workers and time.monotonic() < deadline:
+            time.sleep(0.5)
+            workers = {p for p in _descendants(proc.pid)
+                       if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()}
+        assert workers, "the evaluator started no worker"
+        time.sleep(15)  # the worker has imported the package and is building or running the env
+        family = _descendants(proc.pid)
+        assert workers <= family
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        deadline = time.monotonic() + 20
+        while any(_alive(p) for p in family) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not [p for p in family if _alive(p)], "processes outlived the killed evaluator"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
