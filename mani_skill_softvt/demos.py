@@ -117,7 +117,7 @@ def stats(suite: str, out: Path) -> dict:
     lengths, wall seconds per demo, rejection reasons. Writes ``stats.json`` and ``r_max_hist.png``
     next to the suite's demos; raises FileNotFoundError when there are none."""
     demo_set = DemoSet(out, suite)
-    rows, all_r = [], []
+    rows, all_r, corrupt = [], [], []
     for t in range(NUM_TASKS):
         qc = demo_set.read_qc(t)
         if not qc:
@@ -127,6 +127,7 @@ def stats(suite: str, out: Path) -> dict:
         r = [e["r_max"] for e in eps]
         all_r += r
         walls = [q["wall_s"] for q in qc if "wall_s" in q]
+        corrupt += _unreadable_files(demo_set, t, eps)
         rows.append({"task_id": t, "generated": len(qc), "accepted": len(eps), "success_rate": len(eps) / len(qc),
                      **_r_max_summary(r),
                      "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
@@ -137,7 +138,7 @@ def stats(suite: str, out: Path) -> dict:
                                 f"'python -m mani_skill_softvt.demos generate --suite {suite} --out {out}' first")
     summary = {"suite": suite, "tasks": rows,
                "generated": sum(r["generated"] for r in rows), "accepted": sum(r["accepted"] for r in rows),
-               **_r_max_summary(all_r)}
+               **_r_max_summary(all_r), "unreadable_files": corrupt}
     atomic_write_json(demo_set.stats, summary)
     if all_r:
         import matplotlib
@@ -157,6 +158,18 @@ def stats(suite: str, out: Path) -> dict:
         atomic_write(demo_set.r_max_histogram, lambda p: fig.savefig(p, dpi=120))
         plt.close(fig)
     return summary
+
+
+def _unreadable_files(demo_set: DemoSet, task_id: int, accepted: list[dict]) -> list[str]:
+    """Why each of the task's demo files that should be readable is not: the accepted episodes and
+    the merged trajectory are read in full (states only, small); renderings (images, large) are
+    opened, which is where a truncated HDF5 file fails."""
+    from .data.trajectory import check_h5
+
+    files = [demo_set.episode_file(task_id, q["seed"]) for q in accepted]
+    files += [p for p in (demo_set.trajectory(task_id),) if p.exists()]
+    problems = [check_h5(p) for p in files] + [check_h5(p, read=False) for p in demo_set.renderings(task_id)]
+    return [p for p in problems if p]
 
 
 def _r_max_summary(r_max: list[float]) -> dict:
@@ -227,7 +240,7 @@ def main(argv=None):
     if args.cmd == "render":
         from tqdm import tqdm
 
-        from .data.trajectory import render_observations
+        from .data.trajectory import CorruptDataError, render_observations
 
         demo_set = DemoSet(args.out, args.suite)
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
@@ -236,7 +249,10 @@ def main(argv=None):
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
                 continue
-            n = render_observations(src, demo_set.rendered(t, args.obs_mode), args.suite, t, args.obs_mode)
+            try:
+                n = render_observations(src, demo_set.rendered(t, args.obs_mode), args.suite, t, args.obs_mode)
+            except CorruptDataError as err:
+                ap.error(str(err))
             print(f"task {t}: rendered {n} episodes")
         return None
     if args.cmd == "export-lerobot":
@@ -247,7 +263,7 @@ def main(argv=None):
         try:
             info = export_lerobot(demo_set.lerobot_sources(tasks, args.obs_mode), args.lerobot_out,
                                   use_videos=not args.no_video)
-        except (FileNotFoundError, ValueError) as err:
+        except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
             ap.error(str(err))
         print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "
               f"{info['total_tasks']} tasks (LeRobot {info['codebase_version']}, {info['fps']} fps)")
@@ -259,6 +275,9 @@ def main(argv=None):
     print(format_stats(summary))
     demo_set = DemoSet(args.out, args.suite)
     print(f"written: {demo_set.stats}, {demo_set.r_max_histogram}")
+    if summary["unreadable_files"]:
+        print(f"{len(summary['unreadable_files'])} unreadable demo file(s):", *summary["unreadable_files"], sep="\n  ")
+        raise SystemExit(1)
     return summary
 
 

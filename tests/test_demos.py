@@ -100,3 +100,36 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
         names = []
         g.visit(names.append)
         assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)
+
+
+def test_truncated_demo_files_are_named(dataset, tmp_path, capsys):
+    import shutil
+
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.trajectory import CorruptDataError
+    from mani_skill_softvt.demos import main
+
+    src, _ = dataset
+    out = tmp_path / "demos"
+    shutil.copytree(src, out)
+    demo_set = DemoSet(out, "object_soft")
+    seed = demo_set.read_qc(3)[0]["seed"]
+    episode, trajectory = demo_set.episode_file(3, seed), demo_set.trajectory(3)
+    rendering = demo_set.rendered(3, "rgb+tactile")
+    for path, source in ((episode, episode), (trajectory, trajectory), (rendering, trajectory)):
+        data = source.read_bytes()
+        path.write_bytes(data[: len(data) // 2])  # a writer killed half way (or a full disk)
+    s = stats("object_soft", out)
+    assert len(s["unreadable_files"]) == 3
+    for path, problem in zip((episode, trajectory, rendering), s["unreadable_files"]):
+        assert problem.startswith(str(path)) and "truncated" in problem
+    with pytest.raises(SystemExit) as e:
+        main(["stats", "--out", str(out)])
+    assert e.value.code == 1 and str(trajectory) in capsys.readouterr().out
+    with pytest.raises(CorruptDataError, match=str(episode)):
+        read_episode(episode)
+    for argv in (["render", "--tasks", "3", "--out", str(out)],
+                 ["export-lerobot", "--tasks", "3", "--out", str(out), "--lerobot-out", str(tmp_path / "lr")]):
+        with pytest.raises(SystemExit):
+            main(argv)
+        assert f"{trajectory} is not a readable HDF5 file" in capsys.readouterr().err

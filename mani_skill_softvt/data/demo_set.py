@@ -74,6 +74,10 @@ class DemoSet:
         """The task's episodes re-rendered into ``obs_mode`` observations."""
         return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}.h5"
 
+    def renderings(self, task_id: int) -> list[Path]:
+        """Every rendering of the task's episodes on disk, whatever its obs mode."""
+        return sorted(self.dir.glob(f"task{task_id}_*.h5"))
+
     def tasks_with_trajectories(self) -> list[int]:
         return [t for t in range(NUM_TASKS) if self.trajectory(t).exists()]
 

@@ -26,6 +26,7 @@ import h5py
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
+from .trajectory import open_h5
 
 CODEBASE_VERSION = "v3.0"
 FPS = 20  # the control frequency: one frame per env step
@@ -322,7 +323,7 @@ def _plan(sources: list[Source], use_videos: bool) -> list[dict]:
         for p in (s.trajectory_h5, s.rendered_h5):
             if not Path(p).exists():
                 raise FileNotFoundError(f"{p} does not exist; generate and render the demos first")
-        with h5py.File(s.trajectory_h5, "r") as src, h5py.File(s.rendered_h5, "r") as ren:
+        with open_h5(s.trajectory_h5) as src, open_h5(s.rendered_h5) as ren:
             names = _traj_names(src)
             if not names:
                 raise ValueError(f"{s.trajectory_h5} holds no traj_<i> episodes")
@@ -412,7 +413,7 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
 def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int, features: dict | None,
                   use_videos: bool) -> tuple[dict, dict, dict]:
     """One episode's columns and stats; ``features`` are taken from the first episode, then enforced."""
-    with h5py.File(ep["source"].trajectory_h5, "r") as src, h5py.File(ep["source"].rendered_h5, "r") as ren:
+    with open_h5(ep["source"].trajectory_h5) as src, open_h5(ep["source"].rendered_h5) as ren:
         obs, t = ren[ep["traj"]]["obs"], ep["length"]
         cols = episode_columns(src[ep["traj"]], obs, t, ep_index, task_index, start, fps)
         if features is None:
@@ -432,7 +433,7 @@ def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: li
     """One mp4 per (video key, file) with the group's episodes back to back; fills the rows' offsets."""
     def frames():
         for ep in group:
-            with h5py.File(ep["source"].rendered_h5, "r") as ren:
+            with open_h5(ep["source"].rendered_h5) as ren:
                 data = ren[ep["traj"]]["obs"][obs_key]
                 for i in range(ep["length"]):  # T frames, as in the data file
                     yield data[i]

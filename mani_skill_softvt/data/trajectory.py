@@ -12,6 +12,8 @@ contact and drop events) that never enters any observation.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import h5py
@@ -29,6 +31,45 @@ SOURCE_DESCS = {
                   f"controller, {_CLOSURE_DESC}"),
 }
 SOURCE_DESC = SOURCE_DESCS[DEFAULT_PLANNER]
+REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
+
+
+class CorruptDataError(OSError):
+    """A demonstration file that cannot be read (truncated by a killed writer or a full disk, or damaged)."""
+
+
+@contextmanager
+def open_h5(path: Path) -> Iterator[h5py.File]:
+    """``h5py.File(path, "r")`` whose failure names the file: missing, truncated or not HDF5.
+
+    HDF5 records its end of file in the superblock, so a truncated file fails here, at open.
+    A damaged dataset fails only when read: :func:`check_h5` reads them all.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist; generate (and render) the demos first")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise CorruptDataError(f"{path} is not a readable HDF5 file ({e}): it is truncated or corrupt; "
+                               f"{REGENERATE}") from None
+    with f:
+        yield f
+
+
+def check_h5(path: Path, read: bool = True) -> str | None:
+    """Why ``path`` cannot be opened, or with ``read`` read in full (every dataset); None if it can."""
+    try:
+        with open_h5(path) as f:
+            if not read:
+                return None
+            try:
+                f.visititems(lambda _, v: v[()] if isinstance(v, h5py.Dataset) else None)
+            except OSError as e:  # h5py's read errors name neither the file nor what to do
+                return f"{path}: reading failed ({e}): the file is corrupt; {REGENERATE}"
+    except (CorruptDataError, FileNotFoundError) as e:
+        return str(e)
+    return None
 
 
 def source_desc(planners) -> str:
@@ -158,7 +199,7 @@ def _write_traj(g, ep: dict) -> None:
 
 
 def read_episode(path: Path) -> dict:
-    with h5py.File(path, "r") as f:
+    with open_h5(path) as f:
         g = f["traj"]
         ep = {k: g[k][()] for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail")}
         ep["env_states"] = {}
@@ -222,6 +263,9 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     """
     from ..evaluation.wrapper import make_env
 
+    problem = check_h5(trajectory_h5)  # small (states only): read it all before building the env
+    if problem:
+        raise CorruptDataError(problem)
     env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode)
     u = env.unwrapped
     n = 0
