@@ -44,18 +44,24 @@ def test_committed_card_is_sane(asset_id):
 def test_quick_mode_reproduces_the_committed_card_and_the_envelope_holds(tmp_path):
     from mani_skill_softvt.calibrate import QUICK_ASSET, main
 
+    from mani_skill_softvt.fileio import read_jsonl
+
     committed = load_calibration_card(QUICK_ASSET)
-    # Two of quick mode's closures keep the test short: one below g_min (slips), one inside the envelope.
-    main(["--quick", "--closures", "0.3", "0.7", "--out", str(tmp_path)])
-    fresh = load_calibration_card(QUICK_ASSET, tmp_path)
+    # Two of quick mode's closures keep the test short: one below g_min (slips), one inside the
+    # envelope. Only one closure then holds within tolerance: too coarse a sweep for a card.
+    with pytest.raises(ValueError, match="single closure 0.7"):
+        main(["--quick", "--closures", "0.3", "0.7", "--out", str(tmp_path)])
+    assert not (tmp_path / f"{QUICK_ASSET}.json").exists()
+    fresh = read_jsonl(tmp_path / ".sweeps" / f"{QUICK_ASSET}.jsonl")  # the trials are kept (resume)
+    assert sorted(r["closure"] for r in fresh) == [0.3, 0.7]
     old = {(r["closure"], r["repeat"]): r for r in committed.records}
-    for r in fresh.records:
+    for r in fresh:
         ref = old[(r["closure"], r["repeat"])]
         assert r["seed"] == ref["seed"] and r["held"] == ref["held"]
         assert r["peak_deformation"] == pytest.approx(ref["peak_deformation"], rel=REPRODUCE_REL, abs=1e-4)
         if committed.g_min <= r["closure"] <= committed.g_max:
             assert r["held"], r  # every closure in the envelope holds in a fresh run
-    assert any(committed.g_min <= r["closure"] <= committed.g_max for r in fresh.records)
+    assert any(committed.g_min <= r["closure"] <= committed.g_max for r in fresh)
 
 
 @pytest.mark.slow  # one full calibration trial on the 8-substep twin (~45 s)
@@ -92,7 +98,7 @@ def test_malformed_cards_are_refused_with_the_file_name(tmp_path):
 
     good = load_calibration_card("soft_stw_cube_hq").data
     for change, match in (({"tau_o": float("inf")}, "finite"), ({"tau_o": 0.0}, "positive"),
-                          ({"g_min": 0.9, "g_max": 0.4}, "g_min <= g_max"), ({"g_max": 1.5}, "g_max <= 1"),
+                          ({"g_min": 0.9, "g_max": 0.4}, "g_min < g_max"), ({"g_min": 0.4, "g_max": 0.4}, "single closure"), ({"g_max": 1.5}, "g_max <= 1"),
                           ({"g_min": "0.4"}, "finite number"), ({"asset_id": "soft_pastry001"}, "expected")):
         path = card_path("soft_stw_cube_hq", tmp_path)
         path.write_text(json.dumps({**good, **change}))

@@ -80,8 +80,14 @@ class CalibrationCard:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{source}: {key} must be a finite number, got {v!r}; {_RECALIBRATE}")
             values[key] = float(v)
-        if not 0.0 < values["g_min"] <= values["g_max"] <= 1.0:
-            raise ValueError(f"{source}: the envelope must satisfy 0 < g_min <= g_max <= 1, got g_min "
+        if values["g_min"] == values["g_max"]:
+            # A sweep too coarse to resolve the envelope: only one of its closures both holds and
+            # stays within tau_o. The expert would always grasp at that one closure.
+            raise ValueError(f"{source}: the envelope is the single closure {values['g_min']} (g_min = g_max): "
+                             "the sweep is too coarse to resolve it; add closures on both sides of it "
+                             "(calibrate --closures ...) and recalibrate")
+        if not 0.0 < values["g_min"] < values["g_max"] <= 1.0:
+            raise ValueError(f"{source}: the envelope must satisfy 0 < g_min < g_max <= 1, got g_min "
                              f"{values['g_min']}, g_max {values['g_max']}; {_RECALIBRATE}")
         if not values["tau_o"] > 0.0:
             raise ValueError(f"{source}: tau_o must be positive, got {values['tau_o']}; {_RECALIBRATE}")
