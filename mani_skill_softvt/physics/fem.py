@@ -28,6 +28,7 @@ import numpy as np
 
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
+from .sleeping import SLEEP_TICKS, WAKE_MARGIN, bounding_sphere, box_corners, colliders_near, is_quiet
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
@@ -128,6 +129,8 @@ class ColliderHandle:
     name: str
     body: int
     shapes: list[int] = field(default_factory=list)
+    movable: bool = False  # may push a soft body at any time (the robot): keeps it awake when near
+    bound_points: list[np.ndarray] = field(default_factory=list)  # shape points in the collider frame
 
 
 @wp.kernel
@@ -183,6 +186,7 @@ class SoftBodyWorld:
         contact_gap: float = C.SOFT_CONTACT_GAP,
         use_graph: bool = True,
         device: str = "cpu",
+        sleeping: bool = False,
     ):
         _init_warp()
         self.dt = float(dt)
@@ -199,6 +203,12 @@ class SoftBodyWorld:
         self.colliders: list[ColliderHandle] = []
         self.model = None
         self.time = 0.0
+        # Sleeping (see physics.sleeping): off unless asked for, so physics tests see every tick.
+        self.sleeping = bool(sleeping)
+        self.asleep = False
+        self._quiet_ticks = 0
+        self._sleep_wrench = None
+        self.sleep_stats = {"ticks_simulated": 0, "ticks_asleep": 0}
 
     # ------------------------------------------------------------------ building
     def add_soft_body(
@@ -251,12 +261,12 @@ class SoftBodyWorld:
         self.soft_bodies.append(h)
         return h
 
-    def _new_collider(self, name: str) -> ColliderHandle:
+    def _new_collider(self, name: str, movable: bool) -> ColliderHandle:
         self._require_building()
         if any(c.name == name for c in self.colliders):
             raise ValueError(f"collider '{name}' already exists")
         body = self.builder.add_body(xform=wp.transform_identity(), mass=0.0, is_kinematic=True, label=name)
-        h = ColliderHandle(name, body)
+        h = ColliderHandle(name, body, movable=bool(movable))
         self.colliders.append(h)
         return h
 
@@ -269,10 +279,15 @@ class SoftBodyWorld:
         cfg.has_particle_collision = True
         return cfg
 
-    def add_collider_box(self, name: str, half_extents, local_pose=C.IDENTITY_POSE, friction: float = 1.0):
-        """A kinematic box collider; ``local_pose`` places the box in the collider's frame."""
-        h = self._new_collider(name)
+    def add_collider_box(self, name: str, half_extents, local_pose=C.IDENTITY_POSE, friction: float = 1.0,
+                         movable: bool = False):
+        """A kinematic box collider; ``local_pose`` places the box in the collider's frame.
+
+        ``movable`` marks a collider that may push a soft body at any time (a robot link): a body
+        it comes near never sleeps (see :mod:`~mani_skill_softvt.physics.sleeping`)."""
+        h = self._new_collider(name, movable)
         lp = sapien_pose_to_newton(local_pose)
+        h.bound_points.append(box_corners(half_extents, lp))
         s = self.builder.add_shape_box(
             h.body,
             xform=wp.transform(wp.vec3(*lp[:3]), wp.quat(*lp[3:7])),
@@ -285,11 +300,12 @@ class SoftBodyWorld:
         h.shapes.append(s)
         return h
 
-    def add_collider_boxes(self, name: str, boxes, friction: float = 1.0):
+    def add_collider_boxes(self, name: str, boxes, friction: float = 1.0, movable: bool = False):
         """A kinematic collider made of several boxes: ``[(half_extents, local_pose), ...]``."""
-        h = self._new_collider(name)
+        h = self._new_collider(name, movable)
         for i, (he, local_pose) in enumerate(boxes):
             lp = sapien_pose_to_newton(local_pose)
+            h.bound_points.append(box_corners(he, lp))
             h.shapes.append(
                 self.builder.add_shape_box(
                     h.body,
@@ -301,10 +317,11 @@ class SoftBodyWorld:
             )
         return h
 
-    def add_collider_convex(self, name: str, parts, friction: float = 1.0):
+    def add_collider_convex(self, name: str, parts, friction: float = 1.0, movable: bool = False):
         """A kinematic collider made of convex parts: list of (vertices (N,3), faces (F,3))."""
-        h = self._new_collider(name)
+        h = self._new_collider(name, movable)
         for i, (v, f) in enumerate(parts):
+            h.bound_points.append(np.asarray(v, np.float64).reshape(-1, 3))
             mesh = newton.Mesh(np.asarray(v, np.float32), np.asarray(f, np.int32).reshape(-1))
             h.shapes.append(
                 self.builder.add_shape_convex_hull(h.body, mesh=mesh, cfg=self._shape_cfg(friction), label=f"{name}/part{i}")
@@ -349,6 +366,13 @@ class SoftBodyWorld:
         self._nominal_particle_mass = m.particle_mass.numpy().copy()
         self._graph = None
         self.material_scale = {"youngs_modulus": 1.0, "mass": 1.0}
+        spheres = [bounding_sphere(np.concatenate(c.bound_points)) for c in self.colliders]
+        self._bound_centres = np.array([c for c, _ in spheres]).reshape(-1, 3)
+        self._bound_radii = np.array([r for _, r in spheres])
+        self._movable = np.array([c.movable for c in self.colliders], bool)
+        self._collider_bodies = np.array([c.body for c in self.colliders], int)
+        # Awake until a collider comes closer than this to a body's bounds (see physics.sleeping).
+        self.wake_distance = self.contact_gap + self.particle_radius + WAKE_MARGIN
 
     # ------------------------------------------------------------------ stepping
     def _simulate(self):
@@ -395,14 +419,36 @@ class SoftBodyWorld:
         self.set_collider_poses(poses)
         self._collider_q = self._pending_q
 
+    def _disturbed(self, new_q: np.ndarray) -> bool:
+        """A movable collider, or one that moved this tick, ends the tick near a soft body."""
+        ends, starts = new_q[self._collider_bodies], self._collider_q[self._collider_bodies]
+        candidates = self._movable | np.any(ends != starts, axis=1)
+        if not candidates.any():
+            return False
+        q = self.state_in.particle_q.numpy()
+        near = colliders_near(ends[candidates].astype(np.float64), self._bound_centres[candidates],
+                              self._bound_radii[candidates], q.min(0), q.max(0), self.wake_distance)
+        return bool(near.any())
+
     def step(self) -> np.ndarray:
         """Advance one time step; returns the contact wrench on each collider, (n_colliders, 6).
 
         Row layout: [force (3), torque about the collider frame origin (3)], world frame, N and N*m.
+        With ``sleeping``, a tick in which the soft bodies sleep is not simulated (see
+        :mod:`~mani_skill_softvt.physics.sleeping`): the colliders move, the nodes and the
+        wrenches stay as they were.
         """
         if self.model is None:
             raise RuntimeError("call finalize() before step()")
         new_q = getattr(self, "_pending_q", self._collider_q)
+        disturbed = self.sleeping and self._disturbed(new_q)
+        if self.asleep and not disturbed:
+            self._collider_q = new_q
+            self._pending_q = new_q
+            self.time += self.dt
+            self.sleep_stats["ticks_asleep"] += 1
+            return self._sleep_wrench.copy()
+        self.asleep = False
         qd = np.zeros((len(new_q), 6), np.float32)
         qd[:, :3] = (new_q[:, :3] - self._collider_q[:, :3]) / self.dt  # Newton: linear first
         qd[:, 3:] = angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
@@ -423,8 +469,15 @@ class SoftBodyWorld:
         self._collider_q = new_q
         self._pending_q = new_q
         self.time += self.dt
-        w = self.body_wrench.numpy()[[c.body for c in self.colliders]].astype(np.float64)
-        return w / self.substeps
+        self.sleep_stats["ticks_simulated"] += 1
+        w = self.body_wrench.numpy()[self._collider_bodies].astype(np.float64) / self.substeps
+        if self.sleeping:
+            qd = self.state_in.particle_qd.numpy()  # kept as they are while asleep: a woken body resumes them
+            quiet = is_quiet(float(np.sqrt((qd.astype(np.float64) ** 2).sum(1).max())), disturbed)
+            self._quiet_ticks = self._quiet_ticks + 1 if quiet else 0
+            if self._quiet_ticks >= SLEEP_TICKS:
+                self.asleep, self._quiet_ticks, self._sleep_wrench = True, 0, w.copy()
+        return w
 
     # ------------------------------------------------------------------ state access
     def particle_q(self, body: int | SoftBodyHandle = 0) -> np.ndarray:
@@ -444,12 +497,16 @@ class SoftBodyWorld:
         return body if isinstance(body, SoftBodyHandle) else self.soft_bodies[body]
 
     def get_state(self) -> dict[str, np.ndarray]:
-        """Everything needed to continue bit-identically: particle positions/velocities, collider poses."""
+        """Everything needed to continue bit-identically: particle positions/velocities, collider
+        poses, and the sleep state (asleep, quiet ticks so far; the wrench it returns while asleep)."""
+        n = len(self.colliders)
         return {
             "particle_q": self.state_in.particle_q.numpy().copy(),
             "particle_qd": self.state_in.particle_qd.numpy().copy(),
             "collider_q": self._collider_q.copy(),
             "time": np.array(self.time),
+            "sleep": np.array([float(self.asleep), float(self._quiet_ticks)]),
+            "sleep_wrench": self._sleep_wrench.copy() if self.asleep else np.zeros((n, 6)),
         }
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -464,6 +521,9 @@ class SoftBodyWorld:
         self._collider_q = state["collider_q"].astype(np.float32).copy()
         self._pending_q = self._collider_q
         self.time = float(state.get("time", 0.0))
+        asleep, quiet = state.get("sleep", (0.0, 0.0))  # states saved before sleeping existed: awake
+        self.asleep, self._quiet_ticks = bool(asleep), int(quiet)
+        self._sleep_wrench = np.asarray(state["sleep_wrench"], np.float64).copy() if self.asleep else None
         # VBD keeps per-step scratch (previous positions, contact warm starts) that is rebuilt
         # from state_in at every step, so positions + velocities are the full state.
 
@@ -480,6 +540,11 @@ class SoftBodyWorld:
         for s in (self.state_in, self.state_out):
             s.particle_q.assign(q)
             s.particle_qd.assign(qd)
+        self.wake()
+
+    def wake(self) -> None:
+        """Simulate from the next tick on (a teleport, new materials: the body must respond)."""
+        self.asleep, self._quiet_ticks, self._sleep_wrench = False, 0, None
 
     # ------------------------------------------------------------------ OOD rescaling
     def scale_materials(self, youngs_modulus: float = 1.0, mass: float = 1.0) -> None:
@@ -499,6 +564,7 @@ class SoftBodyWorld:
         inv = np.where(pm > 0, 1.0 / np.where(pm > 0, pm, 1.0), 0.0).astype(np.float32)
         self.model.particle_inv_mass.assign(inv)
         self.material_scale = {"youngs_modulus": float(youngs_modulus), "mass": float(mass)}
+        self.wake()
 
     # ------------------------------------------------------------------ health
     def check_health(self, max_speed: float = C.MAX_PARTICLE_SPEED) -> None:

@@ -93,7 +93,8 @@ class SoftBodyEnv(BaseEnv):
     SUPPORTED_ROBOTS = ["panda_softvt"]
     agent: PandaSoftVT
 
-    def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, **kwargs):
+    def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, soft_sleep: bool = True,
+                 **kwargs):
         if kwargs.get("num_envs", 1) != 1:
             raise ValueError(
                 "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
@@ -109,6 +110,7 @@ class SoftBodyEnv(BaseEnv):
         self._x0: dict[str, np.ndarray] = {}
         self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
         self.settle_info: dict = {}
+        self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
         self._lights, self._ambient = [], None  # the scene's lights at nominal intensity (set when loaded)
         obs_mode = obs_mode or "state"
@@ -210,7 +212,7 @@ class SoftBodyEnv(BaseEnv):
     def _build_soft_world(self):
         self._set_finger_inertia()
         substeps, iterations = vbd_schedule(s.material.youngs_modulus for s in self._specs.values())
-        world = SoftBodyWorld(substeps=substeps, iterations=iterations)
+        world = SoftBodyWorld(substeps=substeps, iterations=iterations, sleeping=self.soft_sleep)
         for spec in self._specs.values():
             world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
         bodies = []
@@ -222,9 +224,10 @@ class SoftBodyEnv(BaseEnv):
                 C.FINGERTIP_HALF_EXTENTS,
                 local_pose=np.array([*C.FINGERTIP_OFFSET[side], 1.0, 0.0, 0.0, 0.0]),
                 friction=PC.FINGER_FRICTION,
+                movable=True,
             )
             bodies.append(MirroredBody(name, robot_links[name], feedback=True))
-        world.add_collider_convex("panda_hand", [_hand_collision_hull()], friction=PC.FINGER_FRICTION)
+        world.add_collider_convex("panda_hand", [_hand_collision_hull()], friction=PC.FINGER_FRICTION, movable=True)
         bodies.append(MirroredBody("panda_hand", robot_links["panda_hand"], feedback=True))
         he = C.TABLE_HALF_EXTENTS
         world.add_collider_box("table", he, local_pose=np.array([0, 0, -he[2], 1, 0, 0, 0]), friction=PC.TABLE_FRICTION)
@@ -310,6 +313,7 @@ class SoftBodyEnv(BaseEnv):
             if ticks >= max_ticks:
                 break
         world.check_health()
+        world.wake()  # the episode starts awake; it may fall asleep in its own first ticks
         self._x0 = {name: world.particle_q(i) for i, name in enumerate(self._specs)}
         self._coupling.wrenches[:] = 0.0
         world.time = 0.0
@@ -465,19 +469,24 @@ class SoftBodyEnv(BaseEnv):
 
     def _soft_state_vector(self) -> np.ndarray:
         s = self._world.get_state()
-        return np.concatenate(
-            [s["particle_q"].ravel(), s["particle_qd"].ravel(), s["collider_q"].ravel(), self._coupling.wrenches.ravel()]
-        ).astype(np.float64)
+        # While asleep the world returns its frozen wrench every tick, which is then also the
+        # coupling's last wrench: the wrenches below restore both.
+        return np.concatenate([s["particle_q"].ravel(), s["particle_qd"].ravel(), s["collider_q"].ravel(),
+                               self._coupling.wrenches.ravel(), s["sleep"]]).astype(np.float64)
 
     def _set_soft_state_vector(self, vec: np.ndarray):
         w = self._world
         n_p, n_b, n_c = w.model.particle_count, w.model.body_count, len(w.colliders)
-        sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6]
+        sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6, 2]
+        if vec.size == sum(sizes[:-1]):  # recorded before soft bodies could sleep: awake
+            vec = np.concatenate([vec, [0.0, 0.0]])
         if vec.size != sum(sizes):
             raise ValueError(f"soft-body state has {vec.size} values, this scene needs {sum(sizes)}")
-        q, qd, cq, wr = np.split(vec, np.cumsum(sizes)[:-1])
-        w.set_state({"particle_q": q.reshape(-1, 3), "particle_qd": qd.reshape(-1, 3), "collider_q": cq.reshape(-1, 7)})
-        self._coupling.wrenches = wr.reshape(n_c, 6).copy()
+        q, qd, cq, wr, sleep = np.split(vec, np.cumsum(sizes)[:-1])
+        wr = wr.reshape(n_c, 6).copy()
+        w.set_state({"particle_q": q.reshape(-1, 3), "particle_qd": qd.reshape(-1, 3), "collider_q": cq.reshape(-1, 7),
+                     "sleep": sleep, "sleep_wrench": wr})
+        self._coupling.wrenches = wr
         self._update_render_meshes()
 
     def place_object(self, name: str, pose: np.ndarray, settle_time: float = 0.0) -> None:
@@ -492,7 +501,7 @@ class SoftBodyEnv(BaseEnv):
         self._world.set_soft_body_pose(i, p)
         self._coupling.teleport()
         for _ in range(int(round(settle_time * C.SIM_FREQ))):
-            self._world.step()
+            self._coupling.wrenches = self._world.step()
         self._update_render_meshes()
 
     # ------------------------------------------------------------------ evaluator-only

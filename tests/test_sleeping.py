@@ -1,0 +1,108 @@
+"""Sleeping soft bodies: the rule's geometry, and a resting cube that sleeps, stays put, and wakes
+before an approaching collider reaches the contact gap; save/restore stays bit for bit."""
+
+import numpy as np
+import pytest
+
+from mani_skill_softvt.assets.tetmesh import box_tetmesh
+from mani_skill_softvt.physics import constants as PC
+from mani_skill_softvt.physics.fem import SoftBodyWorld, SoftMaterial
+from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, bounding_sphere, box_corners, colliders_near,
+                                                rotate_xyzw, sphere_box_distance)
+from mani_skill_softvt.physics.transforms import quat_wxyz_to_matrix
+
+L = 0.05
+PUSHER_HALF = np.array([0.01, 0.01, 0.01])
+
+
+def test_rotation_matches_the_matrix_and_boxes_are_bounded():
+    rng = np.random.default_rng(0)
+    q_wxyz = rng.normal(size=(5, 4))
+    q_wxyz /= np.linalg.norm(q_wxyz, axis=1, keepdims=True)
+    v = rng.normal(size=(5, 3))
+    expected = np.einsum("nij,nj->ni", np.stack([quat_wxyz_to_matrix(q) for q in q_wxyz]), v)
+    assert np.allclose(rotate_xyzw(q_wxyz[:, [1, 2, 3, 0]], v), expected, atol=1e-12)
+    corners = box_corners([0.1, 0.2, 0.3], np.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0]))
+    assert np.allclose(corners.min(0), [0.9, 1.8, 2.7]) and np.allclose(corners.max(0), [1.1, 2.2, 3.3])
+    centre, radius = bounding_sphere(corners)
+    assert np.allclose(centre, [1, 2, 3]) and radius == pytest.approx(np.linalg.norm([0.1, 0.2, 0.3]))
+
+
+def test_distances_to_a_box():
+    lo, hi = np.zeros(3), np.ones(3)
+    centres = np.array([[0.5, 0.5, 0.5], [2.0, 0.5, 0.5], [2.0, 2.0, 0.5], [-3.0, 0.5, 5.0]])
+    assert np.allclose(sphere_box_distance(centres, lo, hi), [0.0, 1.0, np.sqrt(2), 5.0])
+    q = np.array([[3.0, 0.5, 0.5, 0, 0, 0, 1], [1.5, 0.5, 0.5, 0, 0, 0, 1]])
+    # Sphere of radius 0.5 around each collider origin: 1.5 m and 0 m of clearance from the box.
+    near = colliders_near(q, np.zeros((2, 3)), np.array([0.5, 0.5]), lo, hi, wake_distance=0.1)
+    assert near.tolist() == [False, True]
+
+
+def _resting_cube_world():
+    v, t = box_tetmesh((L, L, L), 6)
+    w = SoftBodyWorld(sleeping=True)
+    w.add_soft_body("cube", v, t, SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, friction=1.0),
+                    pose=np.array([0.0, 0.0, PC.PARTICLE_RADIUS, 1, 0, 0, 0]))
+    w.add_collider_box("table", (0.2, 0.2, 0.01), local_pose=np.array([0, 0, -0.01, 1, 0, 0, 0]), friction=0.6)
+    w.add_collider_box("pusher", PUSHER_HALF, movable=True)
+    w.finalize()
+    return w
+
+
+def _poses(pusher_z: float) -> np.ndarray:
+    return np.array([[0, 0, 0, 1, 0, 0, 0], [0, 0, pusher_z, 1, 0, 0, 0]], float)
+
+
+def test_a_resting_cube_sleeps_stays_put_and_wakes_before_contact():
+    w = _resting_cube_world()
+    far = 0.3
+    w.reset_collider_poses(_poses(far))
+    ticks = 0
+    while not w.asleep:  # settles under gravity on the table, then falls asleep
+        last_awake = w.step()
+        ticks += 1
+        assert ticks < 2 * 240, "a resting cube should fall asleep within 2 s"
+    assert ticks >= SLEEP_TICKS
+    resting = w.particle_q()
+    simulated = w.sleep_stats["ticks_simulated"]
+    for _ in range(48):  # 0.2 s asleep: nothing is simulated, nothing moves
+        wrench = w.step()
+    assert w.sleep_stats["ticks_simulated"] == simulated and np.array_equal(w.particle_q(), resting)
+    # Asleep it still presses on the table: the steady contact of its last simulated tick.
+    assert np.array_equal(wrench, last_awake) and wrench[0, 2] < 0.0 and not np.any(wrench[1])
+
+    # A movable pusher comes down at 0.1 m/s: the cube must be awake before the pusher's face
+    # is within the contact gap of its top nodes, and the pusher then feels the contact.
+    top = resting[:, 2].max()
+    z, woke_at = far, None
+    while z > top + PUSHER_HALF[2] - 2e-3:
+        z -= 0.1 / 240
+        w.set_collider_poses(_poses(z))
+        wrench = w.step()
+        if woke_at is None and not w.asleep:
+            woke_at = z
+    assert woke_at is not None
+    clearance = woke_at - PUSHER_HALF[2] - top
+    assert clearance > w.contact_gap + w.particle_radius, clearance
+    assert wrench[1, 2] > 0.0  # 2 mm into the cube: the pusher is pushed back up
+
+
+def test_save_restore_across_sleep_and_wake_is_bit_for_bit():
+    w = _resting_cube_world()
+    w.reset_collider_poses(_poses(0.3))
+    while not w.asleep:
+        w.step()
+    saved = w.get_state()
+    top = w.particle_q()[:, 2].max()
+
+    def approach():
+        out = []
+        for i in range(120):  # from 5 cm above the top face down into contact
+            w.set_collider_poses(_poses(top + PUSHER_HALF[2] + 0.05 - 0.06 * i / 119))
+            out.append(np.concatenate([w.step().ravel(), w.particle_q().ravel(), [float(w.asleep)]]))
+        return np.stack(out)
+
+    first = approach()
+    w.set_state(saved)
+    assert w.asleep
+    assert np.array_equal(approach(), first)
