@@ -504,6 +504,11 @@ class SoftBodyEnv(BaseEnv):
             self._coupling.wrenches = self._world.step()
         self._update_render_meshes()
 
+    @property
+    def soft_world_stats(self) -> dict:
+        """Newton ticks simulated and ticks skipped asleep since the env was built (benchmarks, tests)."""
+        return dict(self._world.sleep_stats)
+
     # ------------------------------------------------------------------ evaluator-only
     @property
     def object_names(self) -> tuple[str, ...]:
