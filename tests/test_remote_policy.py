@@ -262,15 +262,23 @@ def test_env_episode_scored_the_same_in_process_and_served():
         return {**rec, "receipt": {k: v for k, v in rec["receipt"].items() if k != "policy"}}
 
     episode = {"suite": "object_soft", "task_id": 3, "condition": "id", "seed": 7}
-    with _serve_cli("random") as url:  # the server starts while the env builds
-        env = DSRWrapper(gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="rgb", control_mode="pd_ee_pose",
-                                  max_episode_steps=10))
-        try:
+    env = None
+    try:
+        with _serve_cli("random") as url:  # the server starts while the env builds
+            env = DSRWrapper(gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="rgb", control_mode="pd_ee_pose",
+                                      max_episode_steps=10))
             local = run_episode(env, RandomPolicy(), episode)
             remote = WebsocketPolicy(url, connect_timeout=10, reply_timeout=30)
             served = run_episode(env, remote, episode)
             remote.close()
-        finally:
+        # The server is gone: the next episode is a recorded policy_error naming it, not a crash or a hang.
+        t0 = time.perf_counter()
+        refused = run_episode(env, remote, episode, policy_spec=url)
+        assert time.perf_counter() - t0 < 15
+    finally:
+        if env is not None:
             env.close()
     assert served["receipt"]["policy"] == f"remote[random]@{url}" and local["steps"] == 10
     assert strip(served) == strip(local)
+    assert refused["termination"] == "policy_error" and f"cannot connect to the policy server at {url}" in refused["error"]
+    assert refused["steps"] == 0 and not refused["success"] and refused["policy"] == url
