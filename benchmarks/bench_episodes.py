@@ -19,29 +19,14 @@ from __future__ import annotations
 import argparse
 import time
 
-import gymnasium as gym
-import numpy as np
+from bench_sim_speed import bench_pickcube  # same directory: the one PickCube baseline
 
 CAMERAS = 2  # base_camera + hand_camera of the SoftVT tasks
 
 
 def pickcube(obs_mode: str, steps: int) -> float:
     """Wall seconds per control step of PickCube-v1 (random actions, 224x224 camera)."""
-    import mani_skill.envs  # noqa: F401
-
-    env = gym.make("PickCube-v1", obs_mode=obs_mode, sim_backend="physx_cpu", render_backend="cpu",
-                   control_mode="pd_ee_delta_pose", sim_config=dict(sim_freq=240, control_freq=20),
-                   sensor_configs=dict(width=224, height=224))
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    actions = [rng.uniform(-0.2, 0.2, size=env.action_space.shape).astype(np.float32) for _ in range(steps + 1)]
-    env.step(actions[0])
-    t0 = time.perf_counter()
-    for a in actions[1:]:
-        env.step(a)
-    wall = time.perf_counter() - t0
-    env.close()
-    return wall / steps
+    return 1.0 / (20.0 * bench_pickcube(obs_mode, steps))  # bench_pickcube: simulated s per wall s
 
 
 def expert_episode(suite: str, sleep: bool) -> tuple[float, dict]:
