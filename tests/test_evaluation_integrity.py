@@ -139,8 +139,10 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
+    # 20 hold episodes: minutes of work, so the worker is still busy when the evaluator is killed.
     proc = subprocess.Popen([sys.executable, "-m", "mani_skill_softvt.evaluate", "--policy", "hold", "--tasks", "3",
-                             "--out", str(tmp_path)], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             "--episodes-per-task", "20", "--out", str(tmp_path)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 120
         workers = set()
@@ -151,7 +153,7 @@ def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
         assert workers, "the evaluator started no worker"
         time.sleep(15)  # the worker has imported the package and is building or running the env
         family = _descendants(proc.pid)
-        assert workers <= family
+        assert workers <= family, "the worker ended before the kill: give it more work"
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         deadline = time.monotonic() + 20
