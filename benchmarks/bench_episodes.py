@@ -1,15 +1,16 @@
 """Episode costs of the SoftVT suites beside ManiSkill's PickCube-v1, measured in the same run.
 
-    .venv/bin/python benchmarks/bench_episodes.py [--skip-rigid]
+    .venv/bin/python benchmarks/bench_episodes.py [--suites object_soft ...] [--workers 2]
 
 Rows (CPU, one process, 240 Hz physics, 20 Hz control):
 
-- wall seconds per simulated second of one scripted-expert episode (object_soft and object_rigid
-  task 3, obs_mode state_dict), with soft-body sleeping and without (``soft_sleep=False``),
-  against PickCube-v1 physics only (obs_mode state, random actions);
+- wall seconds per simulated second of one scripted-expert episode (task 3 of each suite,
+  obs_mode state_dict; Object-Soft also without soft-body sleeping, ``soft_sleep=False``),
+  against PickCube-v1 physics only (obs_mode state, random actions), and its wall time;
 - milliseconds per idle ``rgb+tactile`` control step per camera (the robot holding still away
   from the object, which sleeps) against PickCube-v1 with one 224x224 camera;
-- the same per-step cost of a 100-step ``hold`` episode with and without sleeping.
+- estimates for the 4,000-demo set and the Object-Soft ID protocol (500 episodes), per core
+  and on ``--workers`` processes.
 
 The ratio column divides by the PickCube row measured in this run, so machines compare.
 """
@@ -30,7 +31,7 @@ def pickcube(obs_mode: str, steps: int) -> float:
 
 
 def expert_episode(suite: str, sleep: bool) -> tuple[float, dict]:
-    """Wall seconds per simulated second of one expert episode; the record and the tick counts."""
+    """Wall seconds per simulated second of one expert episode; its wall time, outcome and tick counts."""
     from mani_skill_softvt.data.seeds import id_seed
     from mani_skill_softvt.evaluation.policies import ScriptedExpertPolicy
     from mani_skill_softvt.evaluation.runner import run_episode
@@ -41,7 +42,8 @@ def expert_episode(suite: str, sleep: bool) -> tuple[float, dict]:
                                                     "seed": id_seed(3, 0)})
     stats = env.unwrapped.soft_world_stats
     env.close()
-    return rec["wall_s"] / (rec["steps"] / 20.0), {**stats, "termination": rec["termination"], "r_max": rec["r_max"]}
+    return rec["wall_s"] / (rec["steps"] / 20.0), {**stats, "termination": rec["termination"], "r_max": rec["r_max"],
+                                                   "wall_s": rec["wall_s"]}
 
 
 def hold_steps(sleep: bool, steps: int, skip: int) -> float:
@@ -64,18 +66,24 @@ def hold_steps(sleep: bool, steps: int, skip: int) -> float:
     return wall / steps
 
 
+SUITES = ("object_soft", "object_rigid", "spatial_soft", "spatial_rigid")
+DEMOS_PER_SUITE = 1000  # 100 per task x 10 tasks (paper), 4,000 over the four suites
+ID_EPISODES = 500  # 50 per task x 10 tasks
+MAX_STEPS = 300
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--skip-rigid", action="store_true", help="leave out the rigid-twin expert episode")
+    ap.add_argument("--suites", nargs="+", default=list(SUITES), choices=SUITES,
+                    help="suites whose expert episode is timed (sleeping on)")
+    ap.add_argument("--workers", type=int, default=2, help="processes assumed by the 'this machine' estimates")
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
     jobs = [("pick_state", lambda: pickcube("state", 100)), ("pick_rgb", lambda: pickcube("rgb", 40)),
-            ("soft_sleep", lambda: expert_episode("object_soft", True)),
             ("soft_awake", lambda: expert_episode("object_soft", False)),
             ("idle_sleep", lambda: hold_steps(True, 40, 20)), ("idle_awake", lambda: hold_steps(False, 40, 20))]
-    if not args.skip_rigid:
-        jobs.append(("rigid_sleep", lambda: expert_episode("object_rigid", True)))
+    jobs += [(suite, lambda suite=suite: expert_episode(suite, True)) for suite in args.suites]
     r = {}
     for name, job in tqdm(jobs, desc="benchmark", unit="row"):
         r[name] = job()
@@ -83,19 +91,31 @@ def main(argv=None):
     pick_cam = r["pick_rgb"] * 1e3  # ms per step, one camera
     print(f"\nPickCube-v1 (same run): {pick_phys:.3f} wall s per simulated s (physics only), "
           f"{pick_cam:.1f} ms per step with one 224x224 camera\n")
-    print(f"{'row':<58}{'value':>12}{'ratio to PickCube':>20}")
-    for key, label in (("soft_sleep", "soft expert episode, sleeping (wall s / sim s)"),
-                       ("soft_awake", "soft expert episode, never sleeping (wall s / sim s)"),
-                       ("rigid_sleep", "rigid-twin expert episode, sleeping (wall s / sim s)")):
-        if key in r:
-            v, stats = r[key]
-            print(f"{label:<58}{v:>12.3f}{v / pick_phys:>20.1f}   "
-                  f"[{stats['termination']}, R_max {stats['r_max']:.4f}, ticks asleep {stats['ticks_asleep']}"
-                  f" of {stats['ticks_asleep'] + stats['ticks_simulated']}]")
-    for key, label in (("idle_sleep", "idle rgb+tactile step per camera, sleeping (ms)"),
-                       ("idle_awake", "idle rgb+tactile step per camera, never sleeping (ms)")):
+    print(f"{'expert episode, task 3 (wall s per simulated s)':<58}{'value':>8}{'x PickCube':>12}{'s/demo':>9}")
+    rows = [(s, f"{s}, sleeping") for s in args.suites]
+    if "object_soft" in r:
+        rows.insert(1, ("soft_awake", "object_soft, never sleeping"))
+    for key, label in rows:
+        v, st = r[key]
+        print(f"{label:<58}{v:>8.2f}{v / pick_phys:>12.1f}{st['wall_s']:>9.1f}   [{st['termination']}, R_max "
+              f"{st['r_max']:.3f}, ticks asleep {st['ticks_asleep']} of {st['ticks_asleep'] + st['ticks_simulated']}]")
+    print(f"\n{'idle rgb+tactile control step, per camera (ms)':<58}{'value':>8}{'x PickCube':>12}")
+    for key, label in (("idle_sleep", "sleeping"), ("idle_awake", "never sleeping")):
         v = r[key] * 1e3 / CAMERAS
-        print(f"{label:<58}{v:>12.1f}{v / pick_cam:>20.2f}")
+        print(f"{label:<58}{v:>8.1f}{v / pick_cam:>12.2f}")
+    # Estimates from the rows above: the expert's episode stands for a demo; a weak policy runs all
+    # MAX_STEPS steps, bounded by never touching (FEM asleep) and touching throughout (FEM awake).
+    print(f"\n{'estimate (hours)':<58}{'per core':>10}{f'{args.workers} workers':>12}")
+    demo_s = sum(r[s][1]["wall_s"] for s in args.suites) * DEMOS_PER_SUITE
+    print(f"{f'{len(args.suites) * DEMOS_PER_SUITE} demos ({len(args.suites)} suites x {DEMOS_PER_SUITE})':<58}"
+          f"{demo_s / 3600:>10.1f}{demo_s / 3600 / args.workers:>12.1f}")
+    for label, per_episode in (("Object-Soft ID protocol, expert", r["object_soft"][1]["wall_s"] if "object_soft" in r else None),
+                               ("Object-Soft ID protocol, rgb+tactile policy never touching", MAX_STEPS * r["idle_sleep"]),
+                               ("Object-Soft ID protocol, rgb+tactile policy touching throughout",
+                                MAX_STEPS * r["idle_awake"])):  # an awake FEM tick costs the same in contact
+        if per_episode is not None:
+            total = ID_EPISODES * per_episode
+            print(f"{label:<58}{total / 3600:>10.1f}{total / 3600 / args.workers:>12.1f}")
 
 
 if __name__ == "__main__":
