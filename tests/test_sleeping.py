@@ -87,6 +87,29 @@ def test_a_resting_cube_sleeps_stays_put_and_wakes_before_contact():
     assert wrench[1, 2] > 0.0  # 2 mm into the cube: the pusher is pushed back up
 
 
+def test_each_body_sleeps_on_its_own():
+    """Two cubes 30 cm apart: pushing one wakes it alone; the other stays asleep and bit-identical."""
+    v, t = box_tetmesh((L, L, L), 6)
+    w = SoftBodyWorld(sleeping=True)
+    material = SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, friction=1.0)
+    for name, x in (("pushed", 0.0), ("bystander", 0.3)):
+        w.add_soft_body(name, v, t, material, pose=np.array([x, 0.0, PC.PARTICLE_RADIUS, 1, 0, 0, 0]))
+    w.add_collider_box("table", (0.5, 0.5, 0.01), local_pose=np.array([0, 0, -0.01, 1, 0, 0, 0]), friction=0.6)
+    w.add_collider_box("pusher", PUSHER_HALF, movable=True)
+    w.finalize()
+    w.reset_collider_poses(_poses(0.3))
+    while not w.asleep:
+        w.step()
+    bystander = w.particle_q(1)
+    top = w.particle_q(0)[:, 2].max()
+    for i in range(120):  # down onto the first cube, 2 mm into it
+        w.set_collider_poses(_poses(top + PUSHER_HALF[2] + 0.05 - 0.052 * min(1.0, i / 100)))
+        wrench = w.step()
+    assert w.bodies_asleep().tolist() == [False, True]
+    assert np.array_equal(w.particle_q(1), bystander) and not np.any(w.particle_qd(1))
+    assert wrench[1, 2] > 0.0 and w.particle_q(0)[:, 2].max() < top  # the pushed cube is compressed
+
+
 def test_save_restore_across_sleep_and_wake_is_bit_for_bit():
     w = _resting_cube_world()
     w.reset_collider_poses(_poses(0.3))

@@ -137,6 +137,8 @@ class ColliderHandle:
 def _sum_soft_contact_wrenches(
     soft_contact_count: wp.array[wp.int32],
     soft_contact_shape: wp.array[wp.int32],
+    soft_contact_particle: wp.array[wp.int32],
+    particle_flags: wp.array[wp.int32],
     shape_body: wp.array[wp.int32],
     contact_f: wp.array[wp.spatial_vector],
     soft_row_offset: int,
@@ -148,6 +150,9 @@ def _sum_soft_contact_wrenches(
         return
     shape = soft_contact_shape[tid]
     if shape < 0:
+        return
+    # A sleeping body's particles are inactive: VBD leaves their contacts unsolved.
+    if (particle_flags[soft_contact_particle[tid]] & int(newton.ParticleFlags.ACTIVE)) == 0:
         return
     body = shape_body[shape]
     if body < 0:
@@ -205,9 +210,9 @@ class SoftBodyWorld:
         self.time = 0.0
         # Sleeping (see physics.sleeping): off unless asked for, so physics tests see every tick.
         self.sleeping = bool(sleeping)
-        self.asleep = False
-        self._quiet_ticks = 0
-        self._sleep_wrench = None
+        self._asleep = np.zeros(0, bool)  # per soft body
+        self._quiet = np.zeros(0, int)  # per soft body: consecutive quiet ticks
+        self._sleep_wrench = None  # returned while every body sleeps
         self.sleep_stats = {"ticks_simulated": 0, "ticks_asleep": 0}
 
     # ------------------------------------------------------------------ building
@@ -373,6 +378,9 @@ class SoftBodyWorld:
         self._collider_bodies = np.array([c.body for c in self.colliders], int)
         # Awake until a collider comes closer than this to a body's bounds (see physics.sleeping).
         self.wake_distance = self.contact_gap + self.particle_radius + WAKE_MARGIN
+        self._asleep = np.zeros(len(self.soft_bodies), bool)
+        self._quiet = np.zeros(len(self.soft_bodies), int)
+        self._active_flags = m.particle_flags.numpy().copy()
 
     # ------------------------------------------------------------------ stepping
     def _simulate(self):
@@ -394,6 +402,8 @@ class SoftBodyWorld:
                 inputs=[
                     self.contacts.soft_contact_count,
                     self.contacts.soft_contact_shape,
+                    self.contacts.soft_contact_particle,
+                    self.model.particle_flags,
                     self.model.shape_body,
                     self.observables.contact_f,
                     self._soft_row_offset,
@@ -419,36 +429,68 @@ class SoftBodyWorld:
         self.set_collider_poses(poses)
         self._collider_q = self._pending_q
 
-    def _disturbed(self, new_q: np.ndarray) -> bool:
-        """A movable collider, or one that moved this tick, ends the tick near a soft body."""
+    @property
+    def asleep(self) -> bool:
+        """Every soft body sleeps: ticks are skipped altogether."""
+        return bool(self._asleep.size and self._asleep.all())
+
+    def bodies_asleep(self) -> np.ndarray:
+        """Which soft bodies sleep (bool per body, in the order they were added)."""
+        return self._asleep.copy()
+
+    def _disturbed(self, new_q: np.ndarray) -> np.ndarray:
+        """Per soft body: a movable collider, or one that moved this tick, ends the tick near it."""
         ends, starts = new_q[self._collider_bodies], self._collider_q[self._collider_bodies]
         candidates = self._movable | np.any(ends != starts, axis=1)
+        out = np.zeros(len(self.soft_bodies), bool)
         if not candidates.any():
-            return False
+            return out
         q = self.state_in.particle_q.numpy()
-        near = colliders_near(ends[candidates].astype(np.float64), self._bound_centres[candidates],
-                              self._bound_radii[candidates], q.min(0), q.max(0), self.wake_distance)
-        return bool(near.any())
+        for i, h in enumerate(self.soft_bodies):
+            v = q[h.particle_start : h.particle_start + h.particle_count]
+            out[i] = colliders_near(ends[candidates].astype(np.float64), self._bound_centres[candidates],
+                                    self._bound_radii[candidates], v.min(0), v.max(0), self.wake_distance).any()
+        return out
+
+    def _set_asleep(self, asleep: np.ndarray) -> None:
+        """Put bodies to sleep or wake them: a sleeping body's particles are inactive for VBD (not
+        moved, velocity zero) and its quiet count restarts."""
+        asleep = np.asarray(asleep, bool)
+        changed = asleep != self._asleep
+        if not changed.any():
+            return
+        flags = self._active_flags.copy()
+        qd = self.state_in.particle_qd.numpy()
+        for i, h in enumerate(self.soft_bodies):
+            sl = slice(h.particle_start, h.particle_start + h.particle_count)
+            if asleep[i]:
+                flags[sl] &= ~int(newton.ParticleFlags.ACTIVE)
+                if changed[i]:
+                    qd[sl] = 0.0  # asleep is at rest
+        self.model.particle_flags.assign(flags)
+        self.state_out.particle_qd.assign(qd)
+        self._quiet[changed] = 0
+        self._asleep = asleep.copy()
 
     def step(self) -> np.ndarray:
         """Advance one time step; returns the contact wrench on each collider, (n_colliders, 6).
 
         Row layout: [force (3), torque about the collider frame origin (3)], world frame, N and N*m.
-        With ``sleeping``, a tick in which the soft bodies sleep is not simulated (see
-        :mod:`~mani_skill_softvt.physics.sleeping`): the colliders move, the nodes and the
-        wrenches stay as they were.
+        With ``sleeping`` (see :mod:`~mani_skill_softvt.physics.sleeping`), sleeping bodies are not
+        simulated, and a tick in which every body sleeps is skipped: the colliders move, the nodes
+        and the wrenches stay as they were.
         """
         if self.model is None:
             raise RuntimeError("call finalize() before step()")
         new_q = getattr(self, "_pending_q", self._collider_q)
-        disturbed = self.sleeping and self._disturbed(new_q)
-        if self.asleep and not disturbed:
+        disturbed = self._disturbed(new_q) if self.sleeping else np.zeros(len(self.soft_bodies), bool)
+        if self.asleep and not disturbed.any():
             self._collider_q = new_q
             self._pending_q = new_q
             self.time += self.dt
             self.sleep_stats["ticks_asleep"] += 1
             return self._sleep_wrench.copy()
-        self.asleep = False
+        self._set_asleep(self._asleep & ~disturbed)
         qd = np.zeros((len(new_q), 6), np.float32)
         qd[:, :3] = (new_q[:, :3] - self._collider_q[:, :3]) / self.dt  # Newton: linear first
         qd[:, 3:] = angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
@@ -472,11 +514,15 @@ class SoftBodyWorld:
         self.sleep_stats["ticks_simulated"] += 1
         w = self.body_wrench.numpy()[self._collider_bodies].astype(np.float64) / self.substeps
         if self.sleeping:
-            qd = self.state_in.particle_qd.numpy()  # kept as they are while asleep: a woken body resumes them
-            quiet = is_quiet(float(np.sqrt((qd.astype(np.float64) ** 2).sum(1).max())), disturbed)
-            self._quiet_ticks = self._quiet_ticks + 1 if quiet else 0
-            if self._quiet_ticks >= SLEEP_TICKS:
-                self.asleep, self._quiet_ticks, self._sleep_wrench = True, 0, w.copy()
+            qd = self.state_in.particle_qd.numpy().astype(np.float64)
+            for i, h in enumerate(self.soft_bodies):
+                if self._asleep[i]:
+                    continue
+                v = qd[h.particle_start : h.particle_start + h.particle_count]
+                self._quiet[i] = self._quiet[i] + 1 if is_quiet(float(np.sqrt((v**2).sum(1).max())), disturbed[i]) else 0
+            self._set_asleep(self._asleep | (self._quiet >= SLEEP_TICKS))
+            if self.asleep:
+                self._sleep_wrench = w.copy()
         return w
 
     # ------------------------------------------------------------------ state access
@@ -505,7 +551,7 @@ class SoftBodyWorld:
             "particle_qd": self.state_in.particle_qd.numpy().copy(),
             "collider_q": self._collider_q.copy(),
             "time": np.array(self.time),
-            "sleep": np.array([float(self.asleep), float(self._quiet_ticks)]),
+            "sleep": np.concatenate([self._asleep, self._quiet]).astype(np.float64),
             "sleep_wrench": self._sleep_wrench.copy() if self.asleep else np.zeros((n, 6)),
         }
 
@@ -521,8 +567,12 @@ class SoftBodyWorld:
         self._collider_q = state["collider_q"].astype(np.float32).copy()
         self._pending_q = self._collider_q
         self.time = float(state.get("time", 0.0))
-        asleep, quiet = state.get("sleep", (0.0, 0.0))  # states saved before sleeping existed: awake
-        self.asleep, self._quiet_ticks = bool(asleep), int(quiet)
+        n = len(self.soft_bodies)
+        sleep = np.asarray(state.get("sleep", np.zeros(2 * n)), np.float64)  # saved before sleeping existed: awake
+        if sleep.shape != (2 * n,):
+            raise ValueError(f"sleep state must hold 2 x {n} values (asleep, quiet ticks per body), got {sleep.shape}")
+        self._set_asleep(sleep[:n] > 0)  # particle flags follow
+        self._quiet = sleep[n:].astype(int)
         self._sleep_wrench = np.asarray(state["sleep_wrench"], np.float64).copy() if self.asleep else None
         # VBD keeps per-step scratch (previous positions, contact warm starts) that is rebuilt
         # from state_in at every step, so positions + velocities are the full state.
@@ -544,7 +594,10 @@ class SoftBodyWorld:
 
     def wake(self) -> None:
         """Simulate from the next tick on (a teleport, new materials: the body must respond)."""
-        self.asleep, self._quiet_ticks, self._sleep_wrench = False, 0, None
+        if self.model is not None:
+            self._set_asleep(np.zeros(len(self.soft_bodies), bool))
+        self._quiet[:] = 0
+        self._sleep_wrench = None
 
     # ------------------------------------------------------------------ OOD rescaling
     def scale_materials(self, youngs_modulus: float = 1.0, mass: float = 1.0) -> None:

@@ -4,13 +4,16 @@ A resting soft body that nothing moving comes near costs the full FEM every tick
 episode's wall time is the Newton tick) and changes nothing. Like PhysX's sleeping rigid bodies,
 :class:`~mani_skill_softvt.physics.fem.SoftBodyWorld` then stops simulating it:
 
-- it falls asleep after ``SLEEP_TICKS`` consecutive ticks in which every node moved slower than
-  ``SLEEP_SPEED`` and no disturbing collider was near (its velocities are then zeroed: at rest);
-- while asleep its nodes, velocities and contact wrenches stay frozen (the frozen wrench is the
-  steady contact of its last tick, e.g. its weight on the table);
-- it wakes, and that tick is simulated, as soon as a disturbing collider's end-of-tick pose comes
-  within ``wake_distance`` of its bounds: the contact gap plus the node radius plus a margin, so
-  it is awake before any collider reaches the contact gap.
+- a body falls asleep after ``SLEEP_TICKS`` consecutive ticks in which each of its nodes moved
+  slower than ``SLEEP_SPEED`` and no disturbing collider was near (its velocities are then zeroed:
+  at rest);
+- a sleeping body's particles are inactive for VBD: not moved, not solved, and their contacts
+  are not reported (only static supports touch a sleeping body, and they take no feedback);
+- while every body sleeps, the tick is skipped altogether and the wrenches of the last simulated
+  tick are returned (the steady contact, e.g. the weight on the table);
+- a body wakes, and that tick is simulated, as soon as a disturbing collider's end-of-tick pose
+  comes within ``wake_distance`` of its bounds: the contact gap plus the node radius plus a
+  margin, so it is awake before any collider reaches the contact gap.
 
 A collider disturbs when it is *movable* (the robot's links: they may push at any time) or when
 it moved this tick; a static support (the table, a basket) touching the body does not. Each

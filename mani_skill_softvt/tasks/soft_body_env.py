@@ -469,17 +469,17 @@ class SoftBodyEnv(BaseEnv):
 
     def _soft_state_vector(self) -> np.ndarray:
         s = self._world.get_state()
-        # While asleep the world returns its frozen wrench every tick, which is then also the
-        # coupling's last wrench: the wrenches below restore both.
+        # While every body sleeps the world returns its frozen wrench every tick, which is then
+        # also the coupling's last wrench: the wrenches below restore both.
         return np.concatenate([s["particle_q"].ravel(), s["particle_qd"].ravel(), s["collider_q"].ravel(),
                                self._coupling.wrenches.ravel(), s["sleep"]]).astype(np.float64)
 
     def _set_soft_state_vector(self, vec: np.ndarray):
         w = self._world
         n_p, n_b, n_c = w.model.particle_count, w.model.body_count, len(w.colliders)
-        sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6, 2]
+        sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6, 2 * len(w.soft_bodies)]
         if vec.size == sum(sizes[:-1]):  # recorded before soft bodies could sleep: awake
-            vec = np.concatenate([vec, [0.0, 0.0]])
+            vec = np.concatenate([vec, np.zeros(sizes[-1])])
         if vec.size != sum(sizes):
             raise ValueError(f"soft-body state has {vec.size} values, this scene needs {sum(sizes)}")
         q, qd, cq, wr, sleep = np.split(vec, np.cumsum(sizes)[:-1])
