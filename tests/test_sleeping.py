@@ -7,8 +7,8 @@ import pytest
 from mani_skill_softvt.assets.tetmesh import box_tetmesh
 from mani_skill_softvt.physics import constants as PC
 from mani_skill_softvt.physics.fem import SoftBodyWorld, SoftMaterial
-from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, bounding_sphere, box_corners, colliders_near,
-                                                rotate_xyzw, sphere_box_distance)
+from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, box_corners, box_gap, colliders_near, local_bounds,
+                                                rotate_xyzw, world_boxes)
 from mani_skill_softvt.physics.transforms import quat_wxyz_to_matrix
 
 L = 0.05
@@ -24,17 +24,25 @@ def test_rotation_matches_the_matrix_and_boxes_are_bounded():
     assert np.allclose(rotate_xyzw(q_wxyz[:, [1, 2, 3, 0]], v), expected, atol=1e-12)
     corners = box_corners([0.1, 0.2, 0.3], np.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0]))
     assert np.allclose(corners.min(0), [0.9, 1.8, 2.7]) and np.allclose(corners.max(0), [1.1, 2.2, 3.3])
-    centre, radius = bounding_sphere(corners)
-    assert np.allclose(centre, [1, 2, 3]) and radius == pytest.approx(np.linalg.norm([0.1, 0.2, 0.3]))
+    lo, hi = local_bounds(corners)
+    assert np.allclose(lo, [0.9, 1.8, 2.7]) and np.allclose(hi, [1.1, 2.2, 3.3])
 
 
-def test_distances_to_a_box():
-    lo, hi = np.zeros(3), np.ones(3)
-    centres = np.array([[0.5, 0.5, 0.5], [2.0, 0.5, 0.5], [2.0, 2.0, 0.5], [-3.0, 0.5, 5.0]])
-    assert np.allclose(sphere_box_distance(centres, lo, hi), [0.0, 1.0, np.sqrt(2), 5.0])
-    q = np.array([[3.0, 0.5, 0.5, 0, 0, 0, 1], [1.5, 0.5, 0.5, 0, 0, 0, 1]])
-    # Sphere of radius 0.5 around each collider origin: 1.5 m and 0 m of clearance from the box.
-    near = colliders_near(q, np.zeros((2, 3)), np.array([0.5, 0.5]), lo, hi, wake_distance=0.1)
+def test_world_boxes_contain_the_posed_shape_and_distances_are_exact():
+    rng = np.random.default_rng(1)
+    lo, hi = np.array([[-0.1, -0.02, 0.0]]), np.array([[0.1, 0.02, 0.05]])
+    q = rng.normal(size=4)
+    pose = np.concatenate([[0.3, -0.2, 0.5], q / np.linalg.norm(q)])[None]
+    w_min, w_max = world_boxes(pose, lo, hi)
+    pts = rng.uniform(lo, hi, size=(500, 3))  # points of the shape, posed
+    posed = rotate_xyzw(pose[0, 3:], pts) + pose[0, :3]
+    assert np.all(posed >= w_min - 1e-12) and np.all(posed <= w_max + 1e-12)
+    # Gaps between unit boxes: overlapping, 1 m apart along x, sqrt(2) m apart diagonally.
+    a_min = np.array([[0.5, 0.5, 0.5], [2.0, 0.0, 0.0], [2.0, 2.0, 0.0]])
+    assert np.allclose(box_gap(a_min, a_min + 1.0, np.zeros(3), np.ones(3)), [0.0, 1.0, np.sqrt(2)])
+    # A 0.2 m cube collider 1.5 m and 0.2 m from the unit box: only the second is within 0.3 m.
+    q = np.array([[2.6, 0.5, 0.5, 0, 0, 0, 1], [1.3, 0.5, 0.5, 0, 0, 0, 1]])
+    near = colliders_near(q, np.full((2, 3), -0.1), np.full((2, 3), 0.1), np.zeros(3), np.ones(3), 0.3)
     assert near.tolist() == [False, True]
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
-from .sleeping import SLEEP_TICKS, WAKE_MARGIN, bounding_sphere, box_corners, colliders_near, is_quiet
+from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, colliders_near, is_quiet, local_bounds
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
@@ -371,9 +371,9 @@ class SoftBodyWorld:
         self._nominal_particle_mass = m.particle_mass.numpy().copy()
         self._graph = None
         self.material_scale = {"youngs_modulus": 1.0, "mass": 1.0}
-        spheres = [bounding_sphere(np.concatenate(c.bound_points)) for c in self.colliders]
-        self._bound_centres = np.array([c for c, _ in spheres]).reshape(-1, 3)
-        self._bound_radii = np.array([r for _, r in spheres])
+        boxes = [local_bounds(np.concatenate(c.bound_points)) for c in self.colliders]
+        self._bound_min = np.array([lo for lo, _ in boxes]).reshape(-1, 3)
+        self._bound_max = np.array([hi for _, hi in boxes]).reshape(-1, 3)
         self._movable = np.array([c.movable for c in self.colliders], bool)
         self._collider_bodies = np.array([c.body for c in self.colliders], int)
         # Awake until a collider comes closer than this to a body's bounds (see physics.sleeping).
@@ -448,8 +448,8 @@ class SoftBodyWorld:
         q = self.state_in.particle_q.numpy()
         for i, h in enumerate(self.soft_bodies):
             v = q[h.particle_start : h.particle_start + h.particle_count]
-            out[i] = colliders_near(ends[candidates].astype(np.float64), self._bound_centres[candidates],
-                                    self._bound_radii[candidates], v.min(0), v.max(0), self.wake_distance).any()
+            out[i] = colliders_near(ends[candidates].astype(np.float64), self._bound_min[candidates],
+                                    self._bound_max[candidates], v.min(0), v.max(0), self.wake_distance).any()
         return out
 
     def _set_asleep(self, asleep: np.ndarray) -> None:

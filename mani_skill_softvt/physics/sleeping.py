@@ -17,7 +17,9 @@ episode's wall time is the Newton tick) and changes nothing. Like PhysX's sleepi
 
 A collider disturbs when it is *movable* (the robot's links: they may push at any time) or when
 it moved this tick; a static support (the table, a basket) touching the body does not. Each
-collider is bounded by a sphere (centre in its own frame, radius), conservative for the check.
+collider is bounded by its shapes' box in its own frame, posed each tick and boxed again in the
+world (conservative for the check; a sphere around the Panda hand, 11 cm in radius, woke the
+object 16 control steps before the fingers touched it).
 """
 
 from __future__ import annotations
@@ -29,11 +31,10 @@ SLEEP_TICKS = 24  # 0.1 s at 240 Hz: two control steps of quiet before sleeping
 WAKE_MARGIN = 1e-2  # m: beyond the contact gap; a collider moves < 4 mm per tick even at 1 m/s
 
 
-def bounding_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
-    """A sphere around ``points`` (N, 3): centre of their box, radius to the farthest point."""
+def local_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box around ``points`` (N, 3) in their own frame: (min corner, max corner)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
-    centre = 0.5 * (points.min(0) + points.max(0))
-    return centre, float(np.linalg.norm(points - centre, axis=1).max())
+    return points.min(0), points.max(0)
 
 
 def box_corners(half_extents, local_pose7_xyzw: np.ndarray) -> np.ndarray:
@@ -51,18 +52,27 @@ def rotate_xyzw(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
-def sphere_box_distance(centres: np.ndarray, box_min: np.ndarray, box_max: np.ndarray) -> np.ndarray:
-    """Distance from each centre (N, 3) to an axis-aligned box (0 inside)."""
-    gap = np.maximum(box_min - centres, 0.0) + np.maximum(centres - box_max, 0.0)
+def world_boxes(collider_q: np.ndarray, local_min: np.ndarray, local_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned world boxes (min, max: (N, 3)) around local boxes posed by ``collider_q``
+    (N, 7: p, q xyzw). Each contains its collider's shapes, so distances from it are conservative."""
+    signs = np.array([[sx, sy, sz] for sx in (0, 1) for sy in (0, 1) for sz in (0, 1)], np.float64)
+    corners = local_min[:, None] + signs[None] * (local_max - local_min)[:, None]  # (N, 8, 3)
+    world = rotate_xyzw(collider_q[:, None, 3:7], corners) + collider_q[:, None, :3]
+    return world.min(1), world.max(1)
+
+
+def box_gap(a_min: np.ndarray, a_max: np.ndarray, b_min: np.ndarray, b_max: np.ndarray) -> np.ndarray:
+    """Distance between axis-aligned boxes a (N, 3 corners) and b (0 where they overlap)."""
+    gap = np.maximum(b_min - a_max, 0.0) + np.maximum(a_min - b_max, 0.0)
     return np.linalg.norm(gap, axis=-1)
 
 
-def colliders_near(collider_q: np.ndarray, centres_local: np.ndarray, radii: np.ndarray,
+def colliders_near(collider_q: np.ndarray, local_min: np.ndarray, local_max: np.ndarray,
                    box_min: np.ndarray, box_max: np.ndarray, wake_distance: float) -> np.ndarray:
-    """Which colliders' bounding spheres, posed by ``collider_q`` (N, 7: p, q xyzw), come within
-    ``wake_distance`` of the box [box_min, box_max]."""
-    centres = collider_q[:, :3] + rotate_xyzw(collider_q[:, 3:7], centres_local)
-    return sphere_box_distance(centres, box_min, box_max) <= radii + wake_distance
+    """Which colliders (local boxes posed by ``collider_q``) come within ``wake_distance`` of the
+    box [box_min, box_max]."""
+    w_min, w_max = world_boxes(collider_q, local_min, local_max)
+    return box_gap(w_min, w_max, box_min, box_max) <= wake_distance
 
 
 def is_quiet(max_node_speed: float, disturbed: bool) -> bool:
