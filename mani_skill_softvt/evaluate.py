@@ -84,11 +84,10 @@ def main(argv=None) -> dict:
     if args.protocol == "ood":
         from .evaluation.report import plot_ood_curves
 
-        from .evaluation.runner import read_records
+        from .evaluation.runner import run_records
 
         id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
-        same = {"policy": args.policy, "obs_mode": args.obs_mode, "control_mode": args.control_mode}
-        id_records = [r for r in read_records(id_file) if all(r.get(k) == v for k, v in same.items())]
+        id_records = list(run_records(id_file, args.policy, args.obs_mode, args.control_mode).values())
         plot_ood_curves(records, id_records, args.out / f"{stem}_ood.png")
     print(md.read_text())
     if records and records[0]["receipt"]["privileged"]:

@@ -7,7 +7,7 @@ import pytest
 from mani_skill_softvt.assets.tetmesh import box_tetmesh
 from mani_skill_softvt.physics import constants as PC
 from mani_skill_softvt.physics.fem import SoftBodyWorld, SoftMaterial
-from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, box_corners, box_gap, colliders_near, local_bounds,
+from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, box_corners, box_gap, local_bounds,
                                                 rotate_xyzw, world_boxes)
 from mani_skill_softvt.physics.transforms import quat_wxyz_to_matrix
 
@@ -42,7 +42,7 @@ def test_world_boxes_contain_the_posed_shape_and_distances_are_exact():
     assert np.allclose(box_gap(a_min, a_min + 1.0, np.zeros(3), np.ones(3)), [0.0, 1.0, np.sqrt(2)])
     # A 0.2 m cube collider 1.5 m and 0.2 m from the unit box: only the second is within 0.3 m.
     q = np.array([[2.6, 0.5, 0.5, 0, 0, 0, 1], [1.3, 0.5, 0.5, 0, 0, 0, 1]])
-    near = colliders_near(q, np.full((2, 3), -0.1), np.full((2, 3), 0.1), np.zeros(3), np.ones(3), 0.3)
+    near = box_gap(*world_boxes(q, np.full((2, 3), -0.1), np.full((2, 3), 0.1)), np.zeros(3), np.ones(3)) <= 0.3
     assert near.tolist() == [False, True]
 
 

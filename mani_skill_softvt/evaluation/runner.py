@@ -38,7 +38,6 @@ from ..physics.fem import SimulationInstabilityError
 from .protocols import episode_key
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
-CONFIG_KEYS = ("policy", "obs_mode", "control_mode")
 UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
 MAX_ERROR_CHARS = 2000
 
@@ -70,6 +69,13 @@ def read_records(path: Path) -> list[dict]:
                                        "remove the line to re-run that episode")
         out.append(rec)
     return out
+
+
+def run_records(path: Path, policy: str, obs_mode: str, control_mode: str) -> dict[tuple, dict]:
+    """The verified records of one run configuration in ``path``, by episode key (resume matches on
+    the configuration: another policy, obs mode or control mode is another run)."""
+    config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode}
+    return {episode_key(r): r for r in read_records(path) if all(r.get(k) == v for k, v in config.items())}
 
 
 def _seal(rec: dict) -> dict:
@@ -197,15 +203,13 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
 
     out = Path(out)
     config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode}
-
-    def ours() -> dict:
-        return {episode_key(r): r for r in read_records(out) if all(r.get(k) == v for k, v in config.items())}
-
-    todo = [ep for ep in episodes if episode_key(ep) not in ours()]
+    done = run_records(out, **config)
+    todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
         progress(len(episodes) - len(todo))
     # A dead worker takes its batch's later episodes with it: run the rest again. Every death
     # records the episode it killed, so this ends.
+    ran = bool(todo)
     while todo:
         batches = defaultdict(list)
         for ep in todo:
@@ -233,7 +237,7 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
                 continue
             if progress is not None:
                 progress(1)
-        done = ours()
+        done = run_records(out, **config)
         todo = [ep for ep in todo if episode_key(ep) not in done] if deaths else []
-    records = ours()
+    records = run_records(out, **config) if ran else done
     return [records[episode_key(ep)] for ep in episodes if episode_key(ep) in records]

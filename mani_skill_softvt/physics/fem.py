@@ -28,7 +28,7 @@ import numpy as np
 
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
-from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, colliders_near, is_quiet, local_bounds
+from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, box_gap, is_quiet, local_bounds, world_boxes
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
@@ -446,10 +446,11 @@ class SoftBodyWorld:
         if not candidates.any():
             return out
         q = self.state_in.particle_q.numpy()
+        w_min, w_max = world_boxes(ends[candidates].astype(np.float64), self._bound_min[candidates],
+                                   self._bound_max[candidates])  # posed once, checked against each body
         for i, h in enumerate(self.soft_bodies):
             v = q[h.particle_start : h.particle_start + h.particle_count]
-            out[i] = colliders_near(ends[candidates].astype(np.float64), self._bound_min[candidates],
-                                    self._bound_max[candidates], v.min(0), v.max(0), self.wake_distance).any()
+            out[i] = bool((box_gap(w_min, w_max, v.min(0), v.max(0)) <= self.wake_distance).any())
         return out
 
     def _set_asleep(self, asleep: np.ndarray) -> None:

@@ -67,14 +67,6 @@ def box_gap(a_min: np.ndarray, a_max: np.ndarray, b_min: np.ndarray, b_max: np.n
     return np.linalg.norm(gap, axis=-1)
 
 
-def colliders_near(collider_q: np.ndarray, local_min: np.ndarray, local_max: np.ndarray,
-                   box_min: np.ndarray, box_max: np.ndarray, wake_distance: float) -> np.ndarray:
-    """Which colliders (local boxes posed by ``collider_q``) come within ``wake_distance`` of the
-    box [box_min, box_max]."""
-    w_min, w_max = world_boxes(collider_q, local_min, local_max)
-    return box_gap(w_min, w_max, box_min, box_max) <= wake_distance
-
-
 def is_quiet(max_node_speed: float, disturbed: bool) -> bool:
     """A tick that counts towards falling asleep."""
     return not disturbed and max_node_speed < SLEEP_SPEED
