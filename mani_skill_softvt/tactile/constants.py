@@ -30,6 +30,19 @@ FOV_HEIGHT = IMAGE_HEIGHT * PIXEL_SIZE  # m, along image rows (pad y)
 # reaching the rigid acrylic backing, so penetration is clamped to [0, GEL_THICKNESS].
 GEL_THICKNESS = 2.0e-3  # m
 MAX_PENETRATION = GEL_THICKNESS  # m; the clamp (alias kept for callers of the older name)
+# Gel compliance. GelSight elastomers are soft, clear silicones of about Shore A 5 (Yuan, Dong &
+# Adelson, "GelSight", Sensors 2017); Gent's Shore-to-modulus relation puts that at E ~ 0.3 MPa.
+# Silicone rubber is nearly incompressible, nu ~ 0.47-0.49. A thin layer bonded to rigid acrylic
+# and pressed over an area wider than it is thick cannot bulge sideways, so it resists with its
+# confined modulus: Johnson's elastic foundation (Contact Mechanics, sec. 5.9),
+# K = (1 - nu) E / ((1 + nu)(1 - 2 nu) h) (tactile.gel). K diverges as nu -> 0.5, which a finite
+# contact never reaches; we take nu = 0.47, the low end, giving K = 6.0 E / h = 9.0e8 Pa/m.
+# Order-of-magnitude values: no one has published a Mini's gel modulus.
+GEL_MODULUS = 0.3e6  # Pa
+GEL_POISSON = 0.47
+# The gel is solved on a grid of 2 x 2 output pixels (0.118 mm): finer than any FEM feature and
+# than the gel's own spreading (>= 1 output px), 4x fewer pixels; the image is upsampled after.
+GEL_GRID_DOWNSAMPLE = 2
 # 10 um of penetration counts as contact: below the gel's visible response and above
 # floating-point noise of a mesh resting on the gel plane.
 CONTACT_THRESHOLD = 1e-5  # m

@@ -2,8 +2,9 @@
 
 ``GelSightConfig("tactile_left", side="left")`` beside the ``CameraConfig`` entries of an env;
 the env builds one :class:`GelSight` per config in its sensor setup. Each capture renders the
-finger's frame from two callables the env hands over: the contact surface (the deformed
-object meshes, world frame) and the pad's 4x4 world pose. The sensor itself holds no simulator
+finger's frame from three callables the env hands over: the contact surface (the deformed
+object meshes, world frame), the pad's 4x4 world pose and the simulated normal force on the pad
+(which sets how deep the gel sinks, :mod:`.gel`). The sensor itself holds no simulator
 handle, so the optics (:class:`~mani_skill_softvt.tactile.sensor.TactileSensor`) stay pure.
 
 Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "marker_initial": (1, 99, 2)
@@ -27,6 +28,9 @@ class GelSightConfig(BaseSensorConfig):
     """A GelSight Mini on one Panda finger (``side`` "left" or "right")."""
 
     side: str = "left"
+    # Half extents (x along image columns, y along rows; m) of the gel the finger carries: no
+    # contact is shown outside it. None: the whole field of view.
+    pad_half_extents: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.side not in SIDES:
@@ -39,11 +43,12 @@ class GelSight(BaseSensor):
     config: GelSightConfig
 
     def __init__(self, config: GelSightConfig, contact_surface: Callable[[], tuple[np.ndarray, np.ndarray]],
-                 pad_pose: Callable[[], np.ndarray]):
+                 pad_pose: Callable[[], np.ndarray], normal_force: Callable[[], float] | None = None):
         super().__init__(config)
-        self.renderer = TactileSensor(config.side)
+        self.renderer = TactileSensor(config.side, pad_half_extents=config.pad_half_extents)
         self._contact_surface = contact_surface
         self._pad_pose = pad_pose
+        self._normal_force = normal_force
         self.frame: TactileFrame | None = None
 
     @property
@@ -57,7 +62,8 @@ class GelSight(BaseSensor):
 
     def capture(self) -> None:
         vertices, faces = self._contact_surface()
-        self.frame = self.renderer.render(vertices, faces, self._pad_pose())
+        force = None if self._normal_force is None else self._normal_force()
+        self.frame = self.renderer.render(vertices, faces, self._pad_pose(), force)
 
     def get_obs(self, **kwargs) -> dict[str, torch.Tensor]:
         if self.frame is None:

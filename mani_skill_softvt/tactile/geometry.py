@@ -91,8 +91,29 @@ def heightmap_from_triangles(vertices: np.ndarray, faces: np.ndarray, width: int
     return np.minimum(depth, max_penetration, out=depth)
 
 
-# The older name, kept for callers.
-penetration_map = heightmap_from_triangles
+def gap_from_triangles(vertices: np.ndarray, faces: np.ndarray, reach: float, width: int = C.IMAGE_WIDTH,
+                       height: int = C.IMAGE_HEIGHT, pixel: float = C.PIXEL_SIZE) -> np.ndarray:
+    """Gap map (H, W) in metres: the height z of the mesh surface closest to the camera along each
+    pixel's ray, where it lies below ``reach`` (negative: past the gel plane), +inf elsewhere.
+
+    What the force-balanced gel (:mod:`.gel`) needs: not only where the object crosses the gel
+    plane but how far each point of it is from touching, up to the gel's travel.
+    """
+    v, f = validate_mesh(vertices, faces)
+    shifted = v - [0.0, 0.0, reach]  # the z-buffer keeps max(-z) > 0: everything below ``reach``
+    depth = np.zeros((height, width))
+    if len(f):
+        tri = shifted[f]
+        lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
+        hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
+        half_w, half_h = width / 2 * pixel, height / 2 * pixel
+        cand = (lo[:, 2] < 0.0) & (hi[:, 2] > -C.BEHIND_PAD_CULL - reach) & (hi[:, 0] >= -half_w) \
+            & (lo[:, 0] <= half_w) & (hi[:, 1] >= -half_h) & (lo[:, 1] <= half_h)
+        if cand.any():
+            _zbuffer(tri[cand], lo[cand], hi[cand], depth, pixel)
+    gap = reach - depth
+    gap[depth <= 0.0] = np.inf
+    return gap
 
 
 def _zbuffer(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray, depth: np.ndarray, pixel: float) -> None:
@@ -161,3 +182,58 @@ def contact_centroid(height: np.ndarray, threshold: float = C.CONTACT_THRESHOLD)
     if len(rows) == 0:
         return None
     return np.array([cols.mean(), rows.mean()])
+
+
+def _clip_polygon(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
+    """Sutherland-Hodgman: the part of a convex polygon (K, D) with ``poly @ normal <= offset``."""
+    if len(poly) == 0:
+        return poly
+    s = poly @ normal - offset
+    out = []
+    for k in range(len(poly)):
+        a, b, sa, sb = poly[k], poly[(k + 1) % len(poly)], s[k], s[(k + 1) % len(poly)]
+        if sa <= 0:
+            out.append(a)
+        if (sa < 0 < sb) or (sb < 0 < sa):
+            out.append(a + (b - a) * (sa / (sa - sb)))
+    return np.array(out).reshape(-1, poly.shape[1])
+
+
+def contact_polygons(vertices_pad: np.ndarray, faces: np.ndarray, half_extents) -> list[np.ndarray]:
+    """The surface in contact with a flat pad, exactly: each triangle's part at or past the gel
+    plane (z <= 0), projected onto it and clipped to the pad rectangle ``half_extents`` (x, y), as
+    convex polygons (K, 2) in metres. Polygon clipping, not pixels: the reference the rendered
+    patch is checked against (tests, gallery). Polygons of different triangles may overlap in
+    projection (a surface folding around the pad's edge): take the union (:func:`polygons_mask`)."""
+    v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
+    hx, hy = map(float, half_extents)
+    tri = v[f]
+    near = (tri[:, :, 2].min(axis=1) <= 0.0) & (tri[:, :, 2].max(axis=1) > -C.BEHIND_PAD_CULL)
+    out = []
+    for t in tri[near]:
+        poly = _clip_polygon(t, np.array([0.0, 0.0, 1.0]), 0.0)  # the part with z <= 0
+        xy = poly[:, :2]
+        for n, o in (((1.0, 0.0), hx), ((-1.0, 0.0), hx), ((0.0, 1.0), hy), ((0.0, -1.0), hy)):
+            xy = _clip_polygon(xy, np.array(n), o)
+        if len(xy) >= 3:
+            out.append(xy)
+    return out
+
+
+def polygon_area(xy: np.ndarray) -> float:
+    """Unsigned area of a simple polygon (K, 2) (shoelace)."""
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def polygons_mask(polygons: list[np.ndarray], width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT,
+                  pixel: float = C.PIXEL_SIZE) -> np.ndarray:
+    """Boolean (H, W): pixel centres inside any of the pad-frame polygons (OpenCV's scan fill)."""
+    import cv2
+
+    mask = np.zeros((height, width), np.uint8)
+    shift = 4  # 1/16 px fixed point
+    for xy in polygons:
+        pts = np.rint(to_pixels(xy, width, height, pixel) * (1 << shift)).astype(np.int32)
+        cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, shift)
+    return mask.astype(bool)

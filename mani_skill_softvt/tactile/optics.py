@@ -165,25 +165,34 @@ def _crop_box(mask: np.ndarray, margin: int, align: int = 4) -> tuple[int, int, 
 _SPREAD_PX = int(np.ceil(C.GEL_KERNEL_SIGMAS * np.sqrt(sum(s * s for s in C.GEL_PYRAMID_SIGMAS) + C.GEL_FINAL_SIGMA ** 2)))
 
 
-def render_image(penetration: np.ndarray, calib: OpticsData | None = None, pixel: float = C.PIXEL_SIZE) -> np.ndarray:
-    """RGB uint8 (H, W, 3) tactile image (no markers) of a penetration map (H, W) in metres.
+def render_image(penetration: np.ndarray, calib: OpticsData | None = None) -> np.ndarray:
+    """RGB uint8 (H, W, 3) tactile image (no markers) of a penetration map in metres.
 
+    The map may be the output resolution (``calib.shape``, default 240 x 320) or an integer
+    fraction of it (the gel grid, :data:`~.constants.GEL_GRID_DOWNSAMPLE`): the gel surface and
+    its colour change are then computed at the map's resolution and the change is upsampled
+    bilinearly onto the full-resolution background (the gel is smooth at that scale).
     Zero penetration everywhere returns exactly (a copy of) the calibration background.
     """
     pen = np.asarray(penetration)
-    calib = calib or load_optics(pen.shape[1] if pen.ndim == 2 else C.IMAGE_WIDTH,
-                                      pen.shape[0] if pen.ndim == 2 else C.IMAGE_HEIGHT)
-    if pen.shape != calib.shape:
-        raise ValueError(f"penetration map must have shape {calib.shape} (H, W), got {pen.shape}")
+    calib = calib or load_optics()
+    H, W = calib.shape
+    f = W // pen.shape[1] if pen.ndim == 2 and pen.shape[1] else 0
+    if pen.ndim != 2 or f < 1 or pen.shape[0] * f != H or pen.shape[1] * f != W:
+        raise ValueError(f"penetration map must have shape {calib.shape} (H, W) or an integer fraction of it, "
+                         f"got {pen.shape}")
     if not np.all(np.isfinite(pen)):
         raise ValueError("penetration map contains NaN or inf")
     img = calib.background.copy()
     pressed = pen > 0.0
     if not pressed.any():
         return img
+    local = calib if f == 1 else load_optics(W // f, H // f)
+    pixel = C.PIXEL_SIZE * W / C.IMAGE_WIDTH * f
     # Only the contact's neighbourhood can change colour: work on that crop.
-    r0, r1, c0, c1 = _crop_box(pressed, _SPREAD_PX)
-    h = gel_surface(pen[r0:r1, c0:c1] / pixel)
+    r0, r1, c0, c1 = _crop_box(pressed, -(-_SPREAD_PX // f))
+    h = gel_surface(pen[r0:r1, c0:c1] / pixel, pyramid=tuple(s / f for s in C.GEL_PYRAMID_SIGMAS),
+                    final_sigma=C.GEL_FINAL_SIGMA / f)
     gx, gy = surface_gradients(h)
     # Slopes within the first magnitude bin read as flat gel: no colour change, background kept.
     mag_bw = bin_width()[0]
@@ -192,10 +201,12 @@ def render_image(penetration: np.ndarray, calib: OpticsData | None = None, pixel
     if len(rr) == 0:
         return img
     i, j = normal_bins(gx[rr, cc], gy[rr, cc])
-    lin = (rr + r0) * calib.shape[1] + (cc + c0)  # flat pixel index in the full image
-    coeff = np.take(calib.delta_table, i * C.NUM_BINS + j, axis=0)  # (n, RGB, 6)
-    feats = np.take(calib.features, lin, axis=0)  # (n, 6)
-    flat = img.reshape(-1, 3)
-    val = np.take(flat, lin, axis=0) + np.einsum("nck,nk->nc", coeff, feats)
-    flat[lin] = np.clip(np.rint(val), 0, 255).astype(np.uint8)
+    coeff = np.take(local.delta_table, i * C.NUM_BINS + j, axis=0)  # (n, RGB, 6)
+    feats = np.take(local.features, (rr + r0) * local.shape[1] + (cc + c0), axis=0)  # (n, 6)
+    change = np.zeros((r1 - r0, c1 - c0, 3), np.float32)
+    change[rr, cc] = np.einsum("nck,nk->nc", coeff, feats)
+    if f > 1:
+        change = cv2.resize(change, ((c1 - c0) * f, (r1 - r0) * f), interpolation=cv2.INTER_LINEAR)
+    region = img[r0 * f:r1 * f, c0 * f:c1 * f]
+    region[:] = np.clip(np.rint(region + change), 0, 255).astype(np.uint8)
     return img

@@ -20,11 +20,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from . import constants as C
 from ..physics.transforms import planar_rigid_fit
-from .geometry import contact_mask, heightmap_from_triangles, to_pixels, validate_mesh
+from .gel import (balanced_indentation, footprint_mask, foundation_stiffness, geometric_indentation,
+                  pressure_indentation)
+from .geometry import contact_mask, gap_from_triangles, to_pixels, validate_mesh
 from .markers import draw_markers, marker_displacements, marker_grid
 from .optics import load_optics, render_image
 
@@ -40,7 +43,9 @@ class TactileFrame:
     image: np.ndarray  # (240, 320, 3) uint8 RGB, markers drawn
     marker_initial: np.ndarray  # (99, 2) float32 (col, row) px, rest positions
     marker_current: np.ndarray  # (99, 2) float32 (col, row) px
-    depth: np.ndarray  # (240, 320) float64 penetration (m), clamped to the gel thickness
+    depth: np.ndarray  # (240, 320) float64 gel indentation (m), at most the gel thickness
+    normal_force: float | None = None  # N pressing the pad (None: the geometry was prescribed)
+    sink: float = 0.0  # m: the force-balanced gel's common sink depth d (tactile.gel)
 
 
 def pad_frame(origin: np.ndarray, normal: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
@@ -92,13 +97,26 @@ class TactileSensor:
     vertex count changes.
     """
 
-    def __init__(self, side: str = "left"):
+    def __init__(self, side: str = "left", pad_half_extents=None, downsample: int = C.GEL_GRID_DOWNSAMPLE,
+                 gel_modulus: float = C.GEL_MODULUS):
         if side not in SIDES:
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+        if downsample < 1 or C.IMAGE_WIDTH % downsample or C.IMAGE_HEIGHT % downsample:
+            raise ValueError(f"downsample must divide {C.IMAGE_WIDTH} x {C.IMAGE_HEIGHT}, got {downsample!r}")
         self.side = side
         self.optics = load_optics()
         self.marker_initial = marker_grid()
         self.background_frame = draw_markers(self.optics.background, self.marker_initial)
+        self.stiffness = foundation_stiffness(gel_modulus)
+        # The gel grid: the field of view at 1/downsample resolution, with rows added above and
+        # below where the pad is longer than the view (the force is carried by the whole pad).
+        self.downsample = downsample
+        self.grid_pixel = C.PIXEL_SIZE * downsample
+        self.grid_width, self.view_rows = C.IMAGE_WIDTH // downsample, C.IMAGE_HEIGHT // downsample
+        half = (C.FOV_WIDTH / 2, C.FOV_HEIGHT / 2) if pad_half_extents is None else tuple(map(float, pad_half_extents))
+        self.half_extents = half
+        self.extra_rows = max(0, int(np.ceil(half[1] / self.grid_pixel - self.view_rows / 2)))
+        self.footprint = footprint_mask(self.view_rows + 2 * self.extra_rows, self.grid_width, self.grid_pixel, half)
         self.reset()
 
     def reset(self) -> None:
@@ -109,39 +127,73 @@ class TactileSensor:
         """This finger's pad pose (see :func:`finger_pad_frame`)."""
         return finger_pad_frame(self.side, origin, normal, hand_x)
 
-    def render(self, vertices_world: np.ndarray, faces: np.ndarray, pad_pose_world: np.ndarray) -> TactileFrame:
+    def render(self, vertices_world: np.ndarray, faces: np.ndarray, pad_pose_world: np.ndarray,
+               normal_force: float | None = None, deformable: bool = True) -> TactileFrame:
         """Frame for the object surface (world vertices (N, 3), triangles (F, 3)) seen by the pad
-        whose 4x4 world pose (pad frame -> world) is ``pad_pose_world``."""
+        whose 4x4 world pose (pad frame -> world) is ``pad_pose_world``; ``normal_force`` and
+        ``deformable`` as in :meth:`indentation`."""
         v, f = validate_mesh(vertices_world, faces, "vertices_world")
-        return self.render_local(world_to_pad(v, pad_pose_world), f)
+        return self.render_local(world_to_pad(v, pad_pose_world), f, normal_force, deformable)
 
-    def render_local(self, vertices_pad: np.ndarray, faces: np.ndarray) -> TactileFrame:
-        """Frame for a surface already expressed in the pad frame."""
+    def indentation(self, vertices_pad: np.ndarray, faces: np.ndarray, normal_force: float | None = None,
+                    deformable: bool = True) -> tuple[np.ndarray, float]:
+        """Gel indentation (m) on the gel grid over the field of view, and the rigid-object sink
+        depth d (0 otherwise). The gel models are in :mod:`.gel`:
+
+        - ``normal_force`` None: the surface's pose is prescribed (geometric indentation);
+        - a force (N) and ``deformable``: an FEM surface against the simulator's rigid pad, the
+          gel sinks with the contact pressure (pressure indentation);
+        - a force and not ``deformable``: a rigid surface, the gel alone conforms (force balance).
+        """
         v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
-        depth = heightmap_from_triangles(v, f)
-        initial = self.marker_initial.astype(np.float32)
-        if not contact_mask(depth).any():
-            self._onset = None
-            return TactileFrame(self.background_frame.copy(), initial, initial.copy(), depth)
-        shear_px, twist, centre = self._patch_motion(v, f)
-        current = marker_displacements(self.marker_initial, depth, shear_px, twist, centre=centre)
-        image = draw_markers(render_image(depth, self.optics), current)
-        return TactileFrame(image, initial, current.astype(np.float32), depth)
+        gap = gap_from_triangles(v, f, C.GEL_THICKNESS, self.grid_width, len(self.footprint), self.grid_pixel)
+        gap[~self.footprint] = np.inf
+        sink = 0.0
+        if normal_force is None:
+            ind = geometric_indentation(gap)
+        elif deformable:
+            # Between nodes the linear surface can dip further than any node does (a triangle
+            # spanning the pad's edge to a node that wraps around it): no deeper than the nodes.
+            hx, hy = self.half_extents
+            on_pad = (np.abs(v[:, 0]) <= hx) & (np.abs(v[:, 1]) <= hy)
+            cap = float(max(0.0, -v[on_pad, 2].min())) if on_pad.any() else 0.0
+            ind = pressure_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2, cap)
+        else:
+            ind, sink = balanced_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2)
+        return ind[self.extra_rows:self.extra_rows + self.view_rows], sink
 
-    def _contact_vertices(self, v: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """Ids of the vertices of triangles that reach into the gel inside the field of view (the
-        material patch that grips the gel; a triangle's corners cover contacts between vertices)."""
+    def render_local(self, vertices_pad: np.ndarray, faces: np.ndarray, normal_force: float | None = None,
+                     deformable: bool = True) -> TactileFrame:
+        """Frame for a surface already expressed in the pad frame (see :meth:`indentation`)."""
+        v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
+        grid, sink = self.indentation(v, f, normal_force, deformable)
+        initial = self.marker_initial.astype(np.float32)
+        if not contact_mask(grid).any():
+            self._onset = None
+            return TactileFrame(self.background_frame.copy(), initial, initial.copy(),
+                                np.zeros((C.IMAGE_HEIGHT, C.IMAGE_WIDTH)), normal_force, sink)
+        depth = grid if self.downsample == 1 else cv2.resize(grid, (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
+                                                              interpolation=cv2.INTER_LINEAR)
+        shear_px, twist, centre = self._patch_motion(v, f, max(sink, 0.0))
+        current = marker_displacements(self.marker_initial, depth, shear_px, twist, centre=centre)
+        image = draw_markers(render_image(grid, self.optics), current)
+        return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink)
+
+    def _contact_vertices(self, v: np.ndarray, f: np.ndarray, reach: float) -> np.ndarray:
+        """Ids of the vertices of triangles that reach into the gel (closer than ``reach`` to its
+        plane) inside the field of view (the material patch that grips the gel; a triangle's
+        corners cover contacts between vertices)."""
         tri_z = v[f, 2]
-        hit = (tri_z.min(axis=1) < 0.0) & (tri_z.max(axis=1) > -C.BEHIND_PAD_CULL)
+        hit = (tri_z.min(axis=1) < reach) & (tri_z.max(axis=1) > -C.BEHIND_PAD_CULL)
         ids = np.unique(f[hit])
         inside = (np.abs(v[ids, 0]) <= C.FOV_WIDTH / 2) & (np.abs(v[ids, 1]) <= C.FOV_HEIGHT / 2)
         return ids[inside] if inside.any() else ids
 
-    def _patch_motion(self, v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float, np.ndarray | None]:
+    def _patch_motion(self, v: np.ndarray, f: np.ndarray, reach: float) -> tuple[np.ndarray, float, np.ndarray | None]:
         """Shear (px, (col, row)), twist (rad) and rotation centre (px) of the contact patch since
         onset: a 2-D rigid (Kabsch) fit of the in-plane motion of the vertices that touched at onset."""
         if self._onset is None or self._onset[0] != len(v):
-            ids = self._contact_vertices(v, f)
+            ids = self._contact_vertices(v, f, reach)
             self._onset = (len(v), ids, v[ids, :2].copy())
             return np.zeros(2), 0.0, None
         _, ids, xy0 = self._onset

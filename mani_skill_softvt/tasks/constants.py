@@ -20,11 +20,6 @@ FINGER_EFFECTIVE_MASS = 1.0  # kg: reflected inertia of the geared finger drive 
 # Newton collider of each fingertip (the URDF's "rubber tip" box), in the finger link frame.
 FINGERTIP_HALF_EXTENTS = (8.75e-3, 7.6e-3, 9.25e-3)
 FINGERTIP_OFFSET = {"left": (0.0, 7.58e-3, 45.25e-3), "right": (0.0, -7.58e-3, 45.25e-3)}
-# Offset of the tactile gel plane from the resting distance of touching FEM nodes (negative: inside
-# the pad). The
-# pads' penalty contact lets loaded nodes overlap them by 1-3 mm; overlap beyond 0.5 mm reads as
-# gel press, so the image shows where the pad pushes hardest instead of a saturated flat field.
-TACTILE_CONTACT_MARGIN = -0.5e-3
 
 # Robot base placement (as in ManiSkill's tabletop tasks), table top at z = 0.
 ROBOT_BASE_POSE = np.array([-0.615, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])

@@ -139,11 +139,15 @@ class SoftBodyEnv(BaseEnv):
     @property
     def _default_tactile_configs(self) -> list[GelSightConfig]:
         """A GelSight Mini on each finger (configured like the cameras, built in the sensor setup)."""
-        return [GelSightConfig(f"tactile_{side}", side=side) for side in ("left", "right")]
+        # The gel covers the fingertip pad: 17.5 mm across the finger (image columns) by 18.5 mm
+        # along it (rows; longer than the 14.2 mm view, so part of the pad's load is out of view).
+        pad = (C.FINGERTIP_HALF_EXTENTS[0], C.FINGERTIP_HALF_EXTENTS[2])
+        return [GelSightConfig(f"tactile_{side}", side=side, pad_half_extents=pad) for side in ("left", "right")]
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
-        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_pose(side))
+        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_pose(side),
+                                            lambda side=cfg.side: self.pad_normal_force(side))
                          for cfg in self._default_tactile_configs}
         if self.tactile_enabled:
             # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
@@ -401,9 +405,15 @@ class SoftBodyEnv(BaseEnv):
         normal = centre[other] - centre[side]
         normal /= np.linalg.norm(normal)
         # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
-        # contact radius) plus the tactile contact margin.
-        face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS + C.TACTILE_CONTACT_MARGIN)
+        # contact radius): the object's surface reaches it exactly when it touches the pad.
+        face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS)
         return finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
+
+    def pad_normal_force(self, side: str) -> float:
+        """Normal force (N) the objects press the ``side`` pad with: last tick's contact force on
+        the finger along the pad normal (the part pulling the pad outwards, never negative)."""
+        normal = self.pad_pose(side)[:3, 2]  # from the pad towards the object
+        return max(0.0, -float(self._coupling.wrench(f"panda_{side}finger")[:3] @ normal))
 
     def pad_poses(self) -> dict[str, np.ndarray]:
         """Both fingers' pad poses: side -> 4x4 world pose."""
