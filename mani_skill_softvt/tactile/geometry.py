@@ -118,9 +118,9 @@ def gap_from_triangles(vertices: np.ndarray, faces: np.ndarray, reach: float, wi
 
 def _zbuffer(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray, depth: np.ndarray, pixel: float) -> None:
     """Write max(-z) of the triangles (T, 3, 3) (with their xyz bounds lo, hi (T, 3)) into
-    ``depth`` at the pixel centres they cover, vectorised over all (triangle, pixel-in-bounding-box)
-    pairs. Barycentric coordinates and the penetration are affine in (col, row), so each triangle
-    is reduced to 9 coefficients and each pair costs one gather and a few multiply-adds."""
+    ``depth`` at the pixel centres they cover, vectorised over all (triangle, covered pixel) pairs.
+    Barycentric coordinates and the penetration are affine in (col, row), so each triangle is
+    reduced to 9 coefficients, each of its rows to one column span, each pixel to a multiply-add."""
     height, width = depth.shape
     off_u, off_w = width / 2 - 0.5, height / 2 - 0.5  # pixel centres sit at integer (col, row)
     u = tri[:, :, 0] / pixel + off_u
@@ -141,29 +141,38 @@ def _zbuffer(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray, depth: np.ndarray,
     p_u = -(a_u * dz0 + b_u * dz1)
     p_w = -(a_w * dz0 + b_w * dz1)
     p_0 = -(z[:, 2] + a_0 * dz0 + b_0 * dz1)
-    coef = np.stack([a_u, a_w, a_0, b_u, b_w, b_0, p_u, p_w, p_0], axis=1)
-    # Pixel centres inside each bounding box (none for sub-pixel triangles between centres).
-    c_lo = np.maximum(np.ceil(lo[:, 0] / pixel + off_u - _EDGE_EPS), 0).astype(np.int64)
-    c_hi = np.minimum(np.floor(hi[:, 0] / pixel + off_u + _EDGE_EPS), width - 1).astype(np.int64)
+    # Scanlines: for each (triangle, row) the three conditions a >= 0, b >= 0, a + b <= 1 are
+    # linear in col, so the covered pixels are one column span; only those are evaluated.
     r_lo = np.maximum(np.ceil(lo[:, 1] / pixel + off_w - _EDGE_EPS), 0).astype(np.int64)
     r_hi = np.minimum(np.floor(hi[:, 1] / pixel + off_w + _EDGE_EPS), height - 1).astype(np.int64)
-    nc = np.maximum(c_hi - c_lo + 1, 0)
-    counts = nc * np.maximum(r_hi - r_lo + 1, 0)
-    total = int(counts.sum())
+    c_lo_t = np.maximum(np.ceil(lo[:, 0] / pixel + off_u - _EDGE_EPS), 0).astype(np.int64)
+    c_hi_t = np.minimum(np.floor(hi[:, 0] / pixel + off_u + _EDGE_EPS), width - 1).astype(np.int64)
+    nrows = np.maximum(r_hi - r_lo + 1, 0)
+    t = np.repeat(np.arange(len(nrows)), nrows)
+    if len(t) == 0:
+        return
+    row = (r_lo[t] + np.arange(len(t)) - np.repeat(np.cumsum(nrows) - nrows, nrows)).astype(np.float64)
+    c_min = c_lo_t[t].astype(np.float64)
+    c_max = c_hi_t[t].astype(np.float64)
+    # Each condition k_u col + k_w row + k_0 >= -eps bounds col from one side.
+    for k_u, k_0 in ((a_u[t], a_w[t] * row + a_0[t]), (b_u[t], b_w[t] * row + b_0[t]),
+                     (-(a_u + b_u)[t], 1.0 - (a_w + b_w)[t] * row - (a_0 + b_0)[t])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = (-_EDGE_EPS - k_0) / k_u
+        pos, neg = k_u > 0, k_u < 0
+        c_min = np.where(pos, np.maximum(c_min, np.ceil(bound - 1e-9)), c_min)
+        c_max = np.where(neg, np.minimum(c_max, np.floor(bound + 1e-9)), c_max)
+        c_max = np.where((k_u == 0) & (k_0 < -_EDGE_EPS), -1.0, c_max)  # row entirely outside
+    ncols = np.maximum(c_max - c_min + 1, 0).astype(np.int64)
+    total = int(ncols.sum())
     if total == 0:
         return
-    t = np.repeat(np.arange(len(counts)), counts)
-    k = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)  # index within the box
-    ncol = nc[t]
-    col = c_lo[t] + k % ncol
-    row = r_lo[t] + k // ncol
-    cf = np.take(coef, t, axis=0)
-    colf, rowf = col.astype(np.float64), row.astype(np.float64)
-    a = cf[:, 0] * colf + cf[:, 1] * rowf + cf[:, 2]
-    b = cf[:, 3] * colf + cf[:, 4] * rowf + cf[:, 5]
-    pen = cf[:, 6] * colf + cf[:, 7] * rowf + cf[:, 8]
-    keep = (a >= -_EDGE_EPS) & (b >= -_EDGE_EPS) & (a + b <= 1.0 + _EDGE_EPS) & (pen > 0.0)
-    np.maximum.at(depth.reshape(-1), row[keep] * width + col[keep], pen[keep])
+    span = np.repeat(np.arange(len(ncols)), ncols)
+    col = c_min[span] + (np.arange(total) - np.repeat(np.cumsum(ncols) - ncols, ncols))
+    ts, rows = t[span], row[span]
+    pen = p_u[ts] * col + p_w[ts] * rows + p_0[ts]
+    keep = pen > 0.0
+    np.maximum.at(depth.reshape(-1), rows[keep].astype(np.int64) * width + col[keep].astype(np.int64), pen[keep])
 
 
 def contact_mask(height: np.ndarray, threshold: float = C.CONTACT_THRESHOLD) -> np.ndarray:

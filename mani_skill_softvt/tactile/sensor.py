@@ -115,6 +115,8 @@ class TactileSensor:
         self.grid_width, self.view_rows = C.IMAGE_WIDTH // downsample, C.IMAGE_HEIGHT // downsample
         half = (C.FOV_WIDTH / 2, C.FOV_HEIGHT / 2) if pad_half_extents is None else tuple(map(float, pad_half_extents))
         self.half_extents = half
+        # Marker rest positions in gel-grid pixels (pixel centres map as (x + 0.5) / k - 0.5).
+        self.marker_grid_xy = (self.marker_initial + 0.5) / downsample - 0.5
         self.extra_rows = max(0, int(np.ceil(half[1] / self.grid_pixel - self.view_rows / 2)))
         self.footprint = footprint_mask(self.view_rows + 2 * self.extra_rows, self.grid_width, self.grid_pixel, half)
         self.reset()
@@ -146,7 +148,10 @@ class TactileSensor:
         - a force and not ``deformable``: a rigid surface, the gel alone conforms (force balance).
         """
         v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
-        gap = gap_from_triangles(v, f, C.GEL_THICKNESS, self.grid_width, len(self.footprint), self.grid_pixel)
+        # Only a rigid surface can load the gel where it does not reach the plane (up to the sink
+        # depth, at most the travel); the other models need the overlap alone, far fewer pixels.
+        reach = C.GEL_THICKNESS if normal_force is not None and not deformable else 0.0
+        gap = gap_from_triangles(v, f, reach, self.grid_width, len(self.footprint), self.grid_pixel)
         gap[~self.footprint] = np.inf
         sink = 0.0
         if normal_force is None:
@@ -175,7 +180,14 @@ class TactileSensor:
         depth = grid if self.downsample == 1 else cv2.resize(grid, (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
                                                               interpolation=cv2.INTER_LINEAR)
         shear_px, twist, centre = self._patch_motion(v, f, max(sink, 0.0))
-        current = marker_displacements(self.marker_initial, depth, shear_px, twist, centre=centre)
+        # The marker field on the gel grid (its fields are smooth at that scale): positions,
+        # lengths and the dilation gain (px of motion per unit slope) scale by 1 / downsample.
+        k = self.downsample
+        current = k * marker_displacements(
+            self.marker_grid_xy, grid, np.asarray(shear_px) / k, twist,
+            centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5, pixel=self.grid_pixel,
+            dilation_gain=C.DILATION_GAIN / k, dilation_sigma=C.DILATION_SIGMA / k, decay=C.SHEAR_DECAY / k)
+        current = current - k * self.marker_grid_xy + self.marker_initial  # exact rest positions kept
         image = draw_markers(render_image(grid, self.optics), current)
         return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink)
 
