@@ -27,7 +27,7 @@ from . import constants as C
 from ..physics.transforms import planar_rigid_fit
 from .gel import (balanced_indentation, footprint_mask, foundation_stiffness, geometric_indentation,
                   pressure_indentation)
-from .geometry import contact_mask, gap_from_triangles, to_pixels, validate_mesh
+from .geometry import gap_from_triangles, to_pixels, validate_mesh
 from .markers import draw_markers, marker_displacements, marker_grid
 from .optics import load_optics, render_image
 
@@ -45,7 +45,12 @@ class TactileFrame:
     marker_current: np.ndarray  # (99, 2) float32 (col, row) px
     depth: np.ndarray  # (240, 320) float64 gel indentation (m), at most the gel thickness
     normal_force: float | None = None  # N pressing the pad (None: the geometry was prescribed)
-    sink: float = 0.0  # m: the force-balanced gel's common sink depth d (tactile.gel)
+    sink: float = 0.0  # m: the rigid-object gel's common sink depth d (tactile.gel), else 0
+    contact: np.ndarray | None = None  # (240, 320) bool: where the object presses the gel at all
+
+    def __post_init__(self):
+        if self.contact is None:
+            self.contact = self.depth > 0.0
 
 
 def pad_frame(origin: np.ndarray, normal: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
@@ -173,12 +178,15 @@ class TactileSensor:
         v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
         grid, sink = self.indentation(v, f, normal_force, deformable)
         initial = self.marker_initial.astype(np.float32)
-        if not contact_mask(grid).any():
+        if not (grid > 0.0).any():
             self._onset = None
             return TactileFrame(self.background_frame.copy(), initial, initial.copy(),
                                 np.zeros((C.IMAGE_HEIGHT, C.IMAGE_WIDTH)), normal_force, sink)
-        depth = grid if self.downsample == 1 else cv2.resize(grid, (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
-                                                              interpolation=cv2.INTER_LINEAR)
+        depth, touching = grid, grid > 0.0
+        if self.downsample > 1:
+            depth = cv2.resize(grid, (C.IMAGE_WIDTH, C.IMAGE_HEIGHT), interpolation=cv2.INTER_LINEAR)
+            touching = cv2.resize(touching.view(np.uint8), (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
+                                  interpolation=cv2.INTER_NEAREST).astype(bool)
         shear_px, twist, centre = self._patch_motion(v, f, max(sink, 0.0))
         # The marker field on the gel grid (its fields are smooth at that scale): positions,
         # lengths and the dilation gain (px of motion per unit slope) scale by 1 / downsample.
@@ -189,7 +197,7 @@ class TactileSensor:
             dilation_gain=C.DILATION_GAIN / k, dilation_sigma=C.DILATION_SIGMA / k, decay=C.SHEAR_DECAY / k)
         current = current - k * self.marker_grid_xy + self.marker_initial  # exact rest positions kept
         image = draw_markers(render_image(grid, self.optics), current)
-        return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink)
+        return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink, touching)
 
     def _contact_vertices(self, v: np.ndarray, f: np.ndarray, reach: float) -> np.ndarray:
         """Ids of the vertices of triangles that reach into the gel (closer than ``reach`` to its

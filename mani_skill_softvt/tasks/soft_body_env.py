@@ -146,7 +146,7 @@ class SoftBodyEnv(BaseEnv):
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
-        self._tactile = {cfg.side: GelSight(cfg, self._contact_surface, lambda side=cfg.side: self.pad_pose(side),
+        self._tactile = {cfg.side: GelSight(cfg, self.contact_surface, lambda side=cfg.side: self.pad_pose(side),
                                             lambda side=cfg.side: self.pad_normal_force(side))
                          for cfg in self._default_tactile_configs}
         if self.tactile_enabled:
@@ -383,7 +383,7 @@ class SoftBodyEnv(BaseEnv):
             entity.add_component(body)
 
     # ------------------------------------------------------------------ tactile
-    def _contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
+    def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
         """World vertices and faces of every object's deformed FEM boundary: the surface the pads
         actually touch (the finer visual mesh is embedded and may sit slightly outside it)."""
         verts, faces, offset = [], [], 0

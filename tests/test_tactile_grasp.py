@@ -1,0 +1,112 @@
+"""The GelSight images of real simulated grasps show the contact (slow: 16 grasps, ~4 min).
+
+For each asset, the calibration grasp at four closures across its card's envelope, held in the
+air; both fingers' frames are checked against the physical contact: the part of the FEM
+surface at or past the pad's surface, within the gel, computed exactly by polygon clipping
+(tactile.geometry.contact_polygons) -- a different computation from the sensor's rasteriser.
+"""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import mani_skill_softvt  # noqa: F401
+from mani_skill_softvt.calibration import protocol as P
+from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
+from mani_skill_softvt.paths import CALIBRATION_DIR
+from mani_skill_softvt.physics.transforms import yaw_between
+from mani_skill_softvt.tactile import constants as C
+from mani_skill_softvt.tactile.geometry import contact_polygons, polygons_mask
+from mani_skill_softvt.tactile.sensor import world_to_pad
+from mani_skill_softvt.tasks.constants import FINGERTIP_HALF_EXTENTS
+
+# The gel in view: the pad (17.5 x 18.5 mm) cut to the field of view (18.9 x 14.2 mm).
+VIEW = (min(FINGERTIP_HALF_EXTENTS[0], C.FOV_WIDTH / 2), min(FINGERTIP_HALF_EXTENTS[2], C.FOV_HEIGHT / 2))
+
+pytestmark = pytest.mark.slow
+HOLD_STEP = 10  # control steps into the hold: lifted, at rest in the grasp
+
+
+def spearman(a, b) -> float:
+    ra, rb = np.argsort(np.argsort(a)), np.argsort(np.argsort(b))
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def held_frames(asset_id: str, closures) -> list[dict]:
+    """Per closure: both fingers' frames, pad normal forces and physical contact masks while held."""
+    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
+    out = []
+    try:
+        for g in closures:
+            env.reset(seed=3)
+            u = env.unwrapped
+            yaw = yaw_between(u.rest_vertices("object"), u.settled_nodes("object"))
+            snap = {}
+
+            def on_step(phase, i, n):
+                if phase == "hold" and i == HOLD_STEP:
+                    nodes, faces = u.contact_surface()
+                    frames = u.tactile_frames()
+                    for side in ("left", "right"):
+                        polys = contact_polygons(world_to_pad(nodes, u.pad_pose(side)), faces, VIEW)
+                        snap[side] = dict(frame=frames[side], force=u.pad_normal_force(side),
+                                          contact=polygons_mask(polys), background=u.tactile_background(side))
+                    snap["lifted"] = u.soft_nodes("object")[:, 2].min() > P.LIFT_THRESHOLD
+                    return "stop"
+
+            run_grasp_script(env, GraspPlan(closure=float(g), yaw=float(yaw), steps=dict(P.STEPS)), on_step=on_step)
+            out.append(snap)
+    finally:
+        env.close()
+    return out
+
+
+def shape(mask: np.ndarray) -> tuple[float, float]:
+    """Aspect ratio (major / minor second-moment axis) and bounding-box fill of a pixel mask."""
+    rows, cols = np.nonzero(mask)
+    ev = np.linalg.eigvalsh(np.cov(np.c_[cols, rows].T.astype(float)))
+    return float(np.sqrt(ev[1] / ev[0])), mask.sum() / ((np.ptp(cols) + 1) * (np.ptp(rows) + 1))
+
+
+@pytest.mark.parametrize("asset_id,twin", [("soft_stw_cube_hq", False), ("soft_stw_sphere_hq", False),
+                                           ("soft_stw_cylinder_hq", False), ("soft_stw_cube_hq", True)])
+def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin):
+    card = json.loads((CALIBRATION_DIR / f"{asset_id}.json").read_text())
+    closures = np.linspace(card["g_min"], card["g_max"], 4)
+    snaps = held_frames(asset_id.replace("soft_", "rigid_") if twin else asset_id, closures)
+    pixel_area = C.PIXEL_SIZE ** 2
+    for side in ("left", "right"):
+        forces, areas, volumes, dilations = [], [], [], []
+        for g, s in zip(closures, snaps):
+            assert s["lifted"], f"{asset_id} closure {g:.2f} was not lifted"
+            fr, contact = s[side]["frame"], s[side]["contact"]
+            patch = fr.contact
+            # The patch is the physical contact: area within 35 %, >= 80 % of it inside.
+            assert contact.sum() > 0 and patch.sum() > 0, f"{asset_id} g={g:.2f} {side}: no patch"
+            ratio = patch.sum() / contact.sum()
+            inside = (patch & contact).sum() / patch.sum()
+            assert 0.65 <= ratio <= 1.35, f"{asset_id} g={g:.2f} {side}: patch / contact area {ratio:.2f}"
+            assert inside >= 0.8, f"{asset_id} g={g:.2f} {side}: only {inside:.0%} of the patch in contact"
+            # The image itself changes where the gel is pressed (and nowhere far from it).
+            changed = np.abs(fr.image.astype(int) - s[side]["background"].astype(int)).sum(axis=2) > 0
+            assert changed.any()
+            forces.append(s[side]["force"])
+            areas.append(patch.sum() * pixel_area)
+            volumes.append(fr.depth.sum() * pixel_area)
+            dilations.append(np.linalg.norm(fr.marker_current - fr.marker_initial, axis=1).mean())
+        # Monotone in the grasp force over the envelope.
+        assert all(b > a for a, b in zip(forces, forces[1:])), forces
+        for name, values in (("area", areas), ("indentation volume", volumes), ("marker dilation", dilations)):
+            assert spearman(forces, values) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
+    # Shape: the foam ball's patch is round once the grasp holds firmly; the cylinder lying on
+    # its side touches along a stripe at the lightest grasp; the cube's flat face fills the gel's
+    # rectangle at the firmest.
+    left = [s["left"]["frame"] for s in snaps]
+    if asset_id == "soft_stw_sphere_hq":
+        assert all(shape(f.contact)[0] < 1.35 for f in left[1:])
+    if asset_id == "soft_stw_cylinder_hq":
+        assert shape(left[0].contact)[0] > 3.0
+    if asset_id == "soft_stw_cube_hq" and not twin:
+        assert shape(left[-1].contact)[1] > 0.85
