@@ -1,10 +1,13 @@
-"""Tactile gallery: each deformable asset's left-finger GelSight image at the moment of grasp.
+"""Tactile gallery: each asset's left-finger GelSight frame while it is held.
 
-    python -m mani_skill_softvt.tactile.gallery [--out docs/tactile_gallery.png] [--closure 0.8]
+    python -m mani_skill_softvt.tactile.gallery [--out docs/tactile_gallery.png] [--closure C]
 
-Runs the scripted grasp on ``SoftGraspLift-v1`` for each asset, stops when the gripper has
-closed, and tiles the tactile images (markers drawn, their displacement from rest drawn as
-arrows magnified x4) into one labelled PNG, like the paper's tactile figure.
+Runs the scripted grasp on ``SoftGraspLift-v1`` for each of the ten assets and the rigid twins
+of the cube and the ball, at the middle of the asset's calibrated envelope (or ``--closure``),
+lifts and stops 10 steps into the hold. Each tile pairs the tactile image (markers drawn, their
+displacement from rest drawn as arrows magnified x20) with the gel's indentation as a heat map
+(its own scale, peak in micrometres), and the physical contact outlined in white: the FEM surface
+at or past the pad (exact polygon clipping, what the tests check the patch against).
 """
 
 from __future__ import annotations
@@ -19,25 +22,55 @@ from tqdm import tqdm
 from ..assets.cards import ASSET_IDS
 from ..paths import REPO_DIR
 
-ARROW_GAIN = 4.0
+ARROW_GAIN = 20.0
+TWINS = ("rigid_stw_cube_hq", "rigid_stw_sphere_hq")
 
 
-def grasp_frame(asset_id: str, closure: float, seed: int = 0):
-    """The left finger's TactileFrame after the grasp closes on ``asset_id``."""
+def envelope_middle(asset_id: str) -> float:
+    """The middle of the asset's calibrated closure envelope (a twin uses its soft asset's card)."""
+    from ..calibration.cards import load_calibration_card
+
+    card = load_calibration_card(asset_id.replace("rigid_", "soft_"))
+    return 0.5 * (card.g_min + card.g_max)
+
+
+def held_frame(asset_id: str, closure: float, seed: int = 0):
+    """The left finger's TactileFrame 10 steps into the hold of the calibration grasp, and the
+    physical contact mask (240, 320) of that pad."""
     import gymnasium as gym
 
     from .. import tasks  # noqa: F401
+    from ..calibration import protocol as P
     from ..calibration.grasp_script import GraspPlan, run_grasp_script
+    from ..tasks.constants import FINGERTIP_HALF_EXTENTS
+    from . import constants as C
+    from .geometry import contact_polygons, polygons_mask
+    from .sensor import world_to_pad
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     try:
         env.reset(seed=seed)
-        plan = GraspPlan(closure=closure)
-        plan.steps = {**plan.steps, "lift": 0, "hold": 0, "lower": 0, "open": 0, "retreat": 0}
-        run_grasp_script(env, plan)
-        return env.unwrapped.tactile_frames()["left"]
+        run_grasp_script(env, GraspPlan(closure=closure, steps={**P.STEPS, "hold": 10}))
+        u = env.unwrapped
+        frame = u.tactile_frames()["left"]
+        nodes, faces = u.contact_surface()
+        view = (min(FINGERTIP_HALF_EXTENTS[0], C.FOV_WIDTH / 2), min(FINGERTIP_HALF_EXTENTS[2], C.FOV_HEIGHT / 2))
+        contact = polygons_mask(contact_polygons(world_to_pad(nodes, u.pad_pose("left")), faces, view))
+        return frame, contact
     finally:
         env.close()
+
+
+def heat_map(frame, contact: np.ndarray) -> np.ndarray:
+    """The indentation as an RGB heat map on its own scale, the physical contact outlined."""
+    peak = float(frame.depth.max())
+    scaled = np.zeros(frame.depth.shape, np.uint8) if peak <= 0 else np.uint8(np.clip(frame.depth / peak, 0, 1) * 255)
+    img = cv2.applyColorMap(scaled, cv2.COLORMAP_INFERNO)[..., ::-1].copy()
+    outline, _ = cv2.findContours(contact.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    cv2.drawContours(img, outline, -1, (255, 255, 255), 1)
+    cv2.putText(img, f"peak {peak * 1e6:.0f} um, {frame.normal_force or 0.0:.1f} N", (6, 232),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+    return img
 
 
 def overlay(frame) -> np.ndarray:
@@ -55,14 +88,17 @@ def main(argv=None) -> None:
 
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.tactile.gallery", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=REPO_DIR / "docs" / "tactile_gallery.png")
-    ap.add_argument("--closure", type=float, default=0.8)
+    ap.add_argument("--closure", type=float, default=None, help="default: the middle of each asset's envelope")
     args = ap.parse_args(argv)
     tiles = []
-    for asset in tqdm(ASSET_IDS, desc="tactile gallery", unit="asset"):
-        img = overlay(grasp_frame(asset, args.closure))
-        cv2.putText(img, asset, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
-        tiles.append(img)
-    rows = [np.concatenate(tiles[i:i + 5], axis=1) for i in range(0, len(tiles), 5)]
+    for asset in tqdm(list(ASSET_IDS) + list(TWINS), desc="tactile gallery", unit="asset"):
+        closure = envelope_middle(asset) if args.closure is None else args.closure
+        frame, contact = held_frame(asset, closure)
+        img = overlay(frame)
+        cv2.putText(img, f"{asset} g={closure:.2f}", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+        tiles.append(np.concatenate([img, heat_map(frame, contact)], axis=0))
+    rows = [np.concatenate(tiles[i:i + 6], axis=1) for i in range(0, len(tiles), 6)]
     save_png(np.concatenate(rows, axis=0), args.out)
     print(f"wrote {args.out}")
 
