@@ -42,6 +42,7 @@ from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.deformation import deformation
 from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_schedule
+from ..physics.transforms import pose_wxyz_to_matrix
 from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.sensor import finger_pad_frame
 from . import constants as C
@@ -397,11 +398,14 @@ class SoftBodyEnv(BaseEnv):
     def pad_pose(self, side: str) -> np.ndarray:
         """4x4 world pose of the ``side`` finger's gel surface (tactile pad frame, see tactile.sensor)."""
         other = {"left": "right", "right": "left"}[side]
+        # Link poses as numpy matrices directly (ManiSkill's batched torch conversion costs ~0.15 ms
+        # a link, most of a tactile frame's overhead).
+        links = self.agent.robot.links_map
         centre = {}
         for s in (side, other):
-            link = self.agent.robot.links_map[f"panda_{s}finger"].pose.to_transformation_matrix()[0].cpu().numpy()
+            link = pose_wxyz_to_matrix(links[f"panda_{s}finger"].pose.raw_pose[0].cpu().numpy().astype(np.float64))
             centre[s] = link[:3, :3] @ np.asarray(C.FINGERTIP_OFFSET[s]) + link[:3, 3]
-        hand = self.agent.robot.links_map["panda_hand"].pose.to_transformation_matrix()[0].cpu().numpy()
+        hand = pose_wxyz_to_matrix(links["panda_hand"].pose.raw_pose[0].cpu().numpy().astype(np.float64))
         normal = centre[other] - centre[side]
         normal /= np.linalg.norm(normal)
         # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
