@@ -3,7 +3,7 @@
 For each asset, the calibration grasp at four closures across its card's envelope, held in the
 air; both fingers' frames are checked against the physical contact: the part of the FEM
 surface at or past the pad's surface, within the gel, computed exactly by polygon clipping
-(tactile.geometry.contact_polygons) -- a different computation from the sensor's rasteriser.
+(env.tactile_contact_reference) -- a different computation from the sensor's rasteriser.
 """
 
 import json
@@ -18,12 +18,6 @@ from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_scri
 from mani_skill_softvt.paths import CALIBRATION_DIR
 from mani_skill_softvt.physics.transforms import yaw_between
 from mani_skill_softvt.tactile import constants as C
-from mani_skill_softvt.tactile.geometry import contact_polygons, polygons_mask
-from mani_skill_softvt.tactile.sensor import world_to_pad
-from mani_skill_softvt.tasks.constants import FINGERTIP_HALF_EXTENTS
-
-# The gel in view: the pad (17.5 x 18.5 mm) cut to the field of view (18.9 x 14.2 mm).
-VIEW = (min(FINGERTIP_HALF_EXTENTS[0], C.FOV_WIDTH / 2), min(FINGERTIP_HALF_EXTENTS[2], C.FOV_HEIGHT / 2))
 
 pytestmark = pytest.mark.slow
 HOLD_STEP = 10  # control steps into the hold: lifted, at rest in the grasp
@@ -47,12 +41,11 @@ def held_frames(asset_id: str, closures) -> list[dict]:
 
             def on_step(phase, i, n):
                 if phase == "hold" and i == HOLD_STEP:
-                    nodes, faces = u.contact_surface()
                     frames = u.tactile_frames()
                     for side in ("left", "right"):
-                        polys = contact_polygons(world_to_pad(nodes, u.pad_pose(side)), faces, VIEW)
                         snap[side] = dict(frame=frames[side], force=u.pad_normal_force(side),
-                                          contact=polygons_mask(polys), background=u.tactile_background(side))
+                                          contact=u.tactile_contact_reference(side),
+                                          background=u.tactile_background(side))
                     snap["lifted"] = u.soft_nodes("object")[:, 2].min() > P.LIFT_THRESHOLD
                     return "stop"
 

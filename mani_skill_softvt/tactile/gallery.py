@@ -42,21 +42,13 @@ def held_frame(asset_id: str, closure: float, seed: int = 0):
     from .. import tasks  # noqa: F401
     from ..calibration import protocol as P
     from ..calibration.grasp_script import GraspPlan, run_grasp_script
-    from ..tasks.constants import FINGERTIP_HALF_EXTENTS
-    from . import constants as C
-    from .geometry import contact_polygons, polygons_mask
-    from .sensor import world_to_pad
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     try:
         env.reset(seed=seed)
         run_grasp_script(env, GraspPlan(closure=closure, steps={**P.STEPS, "hold": 10}))
         u = env.unwrapped
-        frame = u.tactile_frames()["left"]
-        nodes, faces = u.contact_surface()
-        view = (min(FINGERTIP_HALF_EXTENTS[0], C.FOV_WIDTH / 2), min(FINGERTIP_HALF_EXTENTS[2], C.FOV_HEIGHT / 2))
-        contact = polygons_mask(contact_polygons(world_to_pad(nodes, u.pad_pose("left")), faces, view))
-        return frame, contact
+        return u.tactile_frames()["left"], u.tactile_contact_reference("left")
     finally:
         env.close()
 

@@ -4,7 +4,7 @@
 the env builds one :class:`GelSight` per config in its sensor setup. Each capture renders the
 finger's frame from three callables the env hands over: the contact surface (the deformed
 object meshes, world frame), the pad's 4x4 world pose and the simulated normal force on the pad
-(which sets how deep the gel sinks, :mod:`.gel`). The sensor itself holds no simulator
+given that pose (it sets how deep the gel sinks, :mod:`.gel`). The sensor itself holds no simulator
 handle, so the optics (:class:`~mani_skill_softvt.tactile.sensor.TactileSensor`) stay pure.
 
 Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "marker_initial": (1, 99, 2)
@@ -43,7 +43,7 @@ class GelSight(BaseSensor):
     config: GelSightConfig
 
     def __init__(self, config: GelSightConfig, contact_surface: Callable[[], tuple[np.ndarray, np.ndarray]],
-                 pad_pose: Callable[[], np.ndarray], normal_force: Callable[[], float] | None = None):
+                 pad_pose: Callable[[], np.ndarray], normal_force: Callable[[np.ndarray], float] | None = None):
         super().__init__(config)
         self.renderer = TactileSensor(config.side, pad_half_extents=config.pad_half_extents)
         self._contact_surface = contact_surface
@@ -62,8 +62,9 @@ class GelSight(BaseSensor):
 
     def capture(self) -> None:
         vertices, faces = self._contact_surface()
-        force = None if self._normal_force is None else self._normal_force()
-        self.frame = self.renderer.render(vertices, faces, self._pad_pose(), force)
+        pose = self._pad_pose()
+        force = None if self._normal_force is None else self._normal_force(pose)
+        self.frame = self.renderer.render(vertices, faces, pose, force)
 
     def get_obs(self, **kwargs) -> dict[str, torch.Tensor]:
         if self.frame is None:

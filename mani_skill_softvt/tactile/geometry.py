@@ -70,25 +70,12 @@ def heightmap_from_triangles(vertices: np.ndarray, faces: np.ndarray, width: int
                              max_penetration: float = C.GEL_THICKNESS) -> np.ndarray:
     """Penetration depth map (H, W) in metres of a triangle mesh given in the pad frame.
 
-    Z-buffer rasterisation at pixel centres: each triangle that reaches below the gel plane is
-    evaluated (barycentric interpolation of z) at the pixel centres inside its bounding box; a
-    pixel keeps its lowest surface point. Result: ``clip(-z_min, 0, max_penetration)``.
+    The gap map (:func:`gap_from_triangles`) of what reaches past the gel plane, as the gel
+    takes it when the pose is prescribed: ``clip(-z_min, 0, max_penetration)``.
     """
-    v, f = validate_mesh(vertices, faces)
-    depth = np.zeros((height, width))
-    if len(f) == 0:
-        return depth
-    tri = v[f]  # (F, 3 corners, xyz)
-    # Per-triangle bounds (corner-wise min/max: much faster than a reduction over a length-3 axis).
-    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    half_w, half_h = width / 2 * pixel, height / 2 * pixel
-    # Candidates: reach below the gel plane, are not behind the finger, overlap the field of view.
-    cand = (lo[:, 2] < 0.0) & (hi[:, 2] > -C.BEHIND_PAD_CULL) & (hi[:, 0] >= -half_w) & (lo[:, 0] <= half_w) \
-        & (hi[:, 1] >= -half_h) & (lo[:, 1] <= half_h)
-    if cand.any():
-        _zbuffer(tri[cand], lo[cand], hi[cand], depth, pixel)
-    return np.minimum(depth, max_penetration, out=depth)
+    from .gel import geometric_indentation  # the gel model builds on this module's rasteriser
+
+    return geometric_indentation(gap_from_triangles(vertices, faces, 0.0, width, height, pixel), max_penetration)
 
 
 def gap_from_triangles(vertices: np.ndarray, faces: np.ndarray, reach: float, width: int = C.IMAGE_WIDTH,

@@ -120,6 +120,8 @@ class TactileSensor:
         self.grid_width, self.view_rows = C.IMAGE_WIDTH // downsample, C.IMAGE_HEIGHT // downsample
         half = (C.FOV_WIDTH / 2, C.FOV_HEIGHT / 2) if pad_half_extents is None else tuple(map(float, pad_half_extents))
         self.half_extents = half
+        # The gel in view: the pad cut to the field of view.
+        self.view_half_extents = (min(half[0], C.FOV_WIDTH / 2), min(half[1], C.FOV_HEIGHT / 2))
         # Marker rest positions in gel-grid pixels (pixel centres map as (x + 0.5) / k - 0.5).
         self.marker_grid_xy = (self.marker_initial + 0.5) / downsample - 0.5
         self.extra_rows = max(0, int(np.ceil(half[1] / self.grid_pixel - self.view_rows / 2)))

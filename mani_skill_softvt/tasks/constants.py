@@ -20,6 +20,9 @@ FINGER_EFFECTIVE_MASS = 1.0  # kg: reflected inertia of the geared finger drive 
 # Newton collider of each fingertip (the URDF's "rubber tip" box), in the finger link frame.
 FINGERTIP_HALF_EXTENTS = (8.75e-3, 7.6e-3, 9.25e-3)
 FINGERTIP_OFFSET = {"left": (0.0, 7.58e-3, 45.25e-3), "right": (0.0, -7.58e-3, 45.25e-3)}
+# The GelSight gel covers the fingertip pad: half extents across the finger (image columns) and
+# along it (rows): 17.5 x 18.5 mm, longer than the 14.2 mm view, so part of its load is out of view.
+GEL_PAD_HALF_EXTENTS = (FINGERTIP_HALF_EXTENTS[0], FINGERTIP_HALF_EXTENTS[2])
 
 # Robot base placement (as in ManiSkill's tabletop tasks), table top at z = 0.
 ROBOT_BASE_POSE = np.array([-0.615, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])

@@ -44,7 +44,8 @@ from ..physics.deformation import deformation
 from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_schedule
 from ..physics.transforms import pose_wxyz_to_matrix
 from ..tactile.gelsight import GelSight, GelSightConfig
-from ..tactile.sensor import finger_pad_frame
+from ..tactile.geometry import contact_polygons, polygons_mask
+from ..tactile.sensor import finger_pad_frame, world_to_pad
 from . import constants as C
 from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
 from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
@@ -140,15 +141,13 @@ class SoftBodyEnv(BaseEnv):
     @property
     def _default_tactile_configs(self) -> list[GelSightConfig]:
         """A GelSight Mini on each finger (configured like the cameras, built in the sensor setup)."""
-        # The gel covers the fingertip pad: 17.5 mm across the finger (image columns) by 18.5 mm
-        # along it (rows; longer than the 14.2 mm view, so part of the pad's load is out of view).
-        pad = (C.FINGERTIP_HALF_EXTENTS[0], C.FINGERTIP_HALF_EXTENTS[2])
-        return [GelSightConfig(f"tactile_{side}", side=side, pad_half_extents=pad) for side in ("left", "right")]
+        return [GelSightConfig(f"tactile_{side}", side=side, pad_half_extents=C.GEL_PAD_HALF_EXTENTS)
+                for side in ("left", "right")]
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
         self._tactile = {cfg.side: GelSight(cfg, self.contact_surface, lambda side=cfg.side: self.pad_pose(side),
-                                            lambda side=cfg.side: self.pad_normal_force(side))
+                                            lambda pose, side=cfg.side: self.pad_normal_force(side, pose))
                          for cfg in self._default_tactile_configs}
         if self.tactile_enabled:
             # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
@@ -413,11 +412,21 @@ class SoftBodyEnv(BaseEnv):
         face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS)
         return finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
 
-    def pad_normal_force(self, side: str) -> float:
+    def pad_normal_force(self, side: str, pad_pose: np.ndarray | None = None) -> float:
         """Normal force (N) the objects press the ``side`` pad with: last tick's contact force on
-        the finger along the pad normal (the part pulling the pad outwards, never negative)."""
-        normal = self.pad_pose(side)[:3, 2]  # from the pad towards the object
+        the finger along the pad normal (the part pulling the pad outwards, never negative).
+        ``pad_pose``: that pad's pose if the caller has it already."""
+        normal = (self.pad_pose(side) if pad_pose is None else pad_pose)[:3, 2]  # pad -> object
         return max(0.0, -float(self._coupling.wrench(f"panda_{side}finger")[:3] @ normal))
+
+    def tactile_contact_reference(self, side: str) -> np.ndarray:
+        """Evaluator-only reference for the ``side`` sensor: (240, 320) bool, the objects' FEM
+        surface at or past the pad within the gel's view, by exact polygon clipping
+        (tactile.geometry.contact_polygons), which the rendered patch is checked against."""
+        nodes, faces = self.contact_surface()
+        renderer = self._tactile[side].renderer
+        return polygons_mask(contact_polygons(world_to_pad(nodes, self.pad_pose(side)), faces,
+                                              renderer.view_half_extents))
 
     def pad_poses(self) -> dict[str, np.ndarray]:
         """Both fingers' pad poses: side -> 4x4 world pose."""
