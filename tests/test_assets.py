@@ -10,7 +10,6 @@ import trimesh
 from mani_skill_softvt.assets import ASSET_IDS, PROP_NAMES, TWIN_IDS, load_card, load_prop
 from mani_skill_softvt.assets.build import build_object, build_prop
 from mani_skill_softvt.assets.cards import read_obj
-from mani_skill_softvt.assets.materials import RIGID_STIFFNESS_FACTOR
 from mani_skill_softvt.assets.tetmesh import box_tetmesh, surface_of_tets, tet_quality, tet_signed_volumes
 from mani_skill_softvt.paths import ASSETS_DIR
 
@@ -44,8 +43,19 @@ def test_twins_share_mesh_texture_and_mass(soft_id, twin_id):
     assert twin.kind == "rigid" and soft.kind == "soft" and soft.twin_id == twin_id and twin.twin_id == soft_id
     assert twin.surface_file == soft.surface_file and twin.tet_file == soft.tet_file
     assert [p[1:] for p in twin.visual_parts] == [p[1:] for p in soft.visual_parts]
-    assert twin.mass == soft.mass and twin.density == soft.density
-    assert twin.youngs_modulus == pytest.approx(RIGID_STIFFNESS_FACTOR * soft.youngs_modulus)
+    assert twin.mass == soft.mass and twin.density == soft.density and twin.friction == soft.friction
+    # A PhysX rigid body: no elastic constants, convex collision parts of the same surface.
+    assert twin.youngs_modulus is None and twin.poisson_ratio is None and not soft.collision_files
+    with pytest.raises(ValueError, match="rigid twin"):
+        twin.material()
+    volume = 0.0
+    for v, f in twin.convex_parts():
+        m = trimesh.Trimesh(v, f, process=False)
+        assert m.convex_hull.volume == pytest.approx(abs(m.volume), rel=0.02)  # each part is convex
+        volume += abs(m.volume)
+    # coacd stops at concavity 0.05 of the size; the parts fill the surface's volume within 2 %
+    # (overlaps and hull bulges over the pastries' dimples), so the twin collides like the object.
+    assert volume == pytest.approx(soft.volume, rel=0.02)
 
 
 @pytest.mark.parametrize("name", PROP_NAMES)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mani_skill_softvt.assets.cards import ASSET_IDS
+from mani_skill_softvt.assets.cards import ASSET_IDS, load_card
 from mani_skill_softvt.calibration import protocol as P
 from mani_skill_softvt.calibration.cards import load_calibration_card
 from mani_skill_softvt.calibration.stats import by_closure
@@ -64,31 +64,30 @@ def test_quick_mode_reproduces_the_committed_card_and_the_envelope_holds(tmp_pat
     assert any(committed.g_min <= r["closure"] <= committed.g_max for r in fresh)
 
 
-@pytest.mark.slow  # one full calibration trial on the 8-substep twin (~45 s)
-def test_rigid_twin_deformation_is_small_against_the_tolerance():
+@pytest.mark.parametrize("soft_id", ["soft_stw_cube_hq", "soft_pastry005"])  # convex; 3 convex parts
+def test_rigid_twin_holds_without_deforming_under_the_full_squeeze(soft_id):
+    """The twin is a PhysX rigid body: under the full 10 N squeeze (closure 1, past every
+    envelope) it is held and its R_max is float rounding, far below the issue's 0.02 bound, so
+    DSR equals TSR on the rigid suites by physics."""
     import gymnasium as gym
 
     import mani_skill_softvt  # noqa: F401
-    from mani_skill_softvt.assets.materials import RIGID_STIFFNESS_FACTOR
+    from mani_skill_softvt.assets.cards import twin_id
     from mani_skill_softvt.calibration.sweep import run_trial
     from mani_skill_softvt.data.seeds import calibration_seed
 
-    card = load_calibration_card("soft_stw_cube_hq")
-    # The soft cube's own trial at the tightest closure (full 10 N squeeze), same seed and pose.
-    seed = calibration_seed(ASSET_IDS.index("soft_stw_cube_hq"), 1.0, 0)
-    soft = next(r for r in card.records if r["seed"] == seed)
-    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id="rigid_stw_cube_hq")
+    card = load_calibration_card(soft_id)
+    seed = calibration_seed(ASSET_IDS.index(soft_id), 1.0, 0)
+    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=twin_id(soft_id))
     rec = run_trial(env, 1.0, seed)
+    material = env.unwrapped.object_material()
     env.close()
-    print(f"rigid twin peak D {rec['peak_deformation']:.5f} vs soft {soft['peak_deformation']:.5f}, "
-          f"tau_o {card.tau_o:.5f}")
-    assert rec["held"] and np.isfinite(rec["peak_deformation"])
-    # Same squeeze force, modulus x RIGID_STIFFNESS_FACTOR: linear elasticity scales D by its inverse;
-    # a factor 2 of slack covers the pads' penalty overlap, which does not stiffen with the body.
-    assert rec["peak_deformation"] < 2.0 * soft["peak_deformation"] / RIGID_STIFFNESS_FACTOR
-    # Negligible against the tolerance even beyond the envelope: R_t stays below 1/2.
-    assert rec["peak_deformation"] < 0.5 * card.tau_o
-    assert P.REPEATS >= 2
+    print(f"{twin_id(soft_id)} peak D {rec['peak_deformation']:.3g}, tau_o {card.tau_o:.5f}")
+    assert rec["held"]
+    assert material["youngs_modulus"] is None and material["mass"] == pytest.approx(load_card(twin_id(soft_id)).mass)
+    # Nodes carried by a float32 pose: D_t is rounding, ~1e-7 of the object's size at most.
+    assert rec["peak_deformation"] < 1e-6
+    assert rec["peak_deformation"] / card.tau_o <= 0.02
 
 
 def test_malformed_cards_are_refused_with_the_file_name(tmp_path):

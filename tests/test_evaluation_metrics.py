@@ -83,14 +83,14 @@ def test_protocol_seeds_are_disjoint_and_ood_reuses_id_states():
         episodes("object_rigid", "ood")
 
 
-def test_rigid_suites_score_dsr_equal_to_tsr():
-    # Rigid twins are scored on task success alone (the paper's construction), even if a stiff
-    # twin's R_max came out above 1, and rescoring at any tolerance keeps it so.
-    recs = [dict(_rec(s, r), rigid=True) for s, r in [(True, 0.1), (True, 1.3), (False, 0.2), (False, 2.0)]]
-    recs = [rescore_record(r, 0.01) for r in recs]
-    s = summarize(recs)
-    assert s["dsr"] == s["tsr"] == 0.5 and s["gap"] == 0.0
-    assert all(rescore_record(r, 1e-4)["dsr_success"] == r["success"] for r in recs)
+def test_rigid_suites_are_scored_by_the_same_rule():
+    # No special case for rigid twins: a record is DSR-successful when it succeeded with R_max <= 1,
+    # whatever its suite (the twins' R_max is ~0 by physics: test_calibration).
+    recs = [dict(_rec(s, r), rigid=True) for s, r in [(True, 1e-9), (True, 1.3), (False, 0.2)]]
+    s = summarize([rescore_record(r, 0.01) for r in recs])
+    assert [rescore_record(r, 0.01)["dsr_success"] for r in recs] == [True, False, False]
+    assert s["tsr"] == pytest.approx(2 / 3) and s["dsr"] == pytest.approx(1 / 3)
+    assert s["tolerance_violations"] == 1
 
 
 def test_ratio_and_peak():

@@ -4,7 +4,8 @@
     python -m mani_skill_softvt.assets.build --out /tmp/assets --only soft_stw_cube_hq
 
 Objects: surface mesh (OBJ), tetrahedral mesh at the default hex resolution (NPZ), visual parts
-(OBJ, one colour each) and a card (JSON); rigid twins get a card that reuses the soft files.
+(OBJ, one colour each) and a card (JSON). Rigid twins (PhysX rigid bodies) get a card that reuses
+the soft files and their own convex collision parts (coacd decomposition of the soft surface).
 Props: visual mesh, convex collision parts (coacd for the concave basket and plate) and a card.
 Every file is written to a temporary name and renamed, so an interrupted build never leaves a
 half-written file; a rerun rewrites identical bytes.
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..paths import ASSETS_DIR
 from .cards import ASSET_IDS, PROP_NAMES, read_obj, twin_id
-from .materials import MATERIALS, PROP_FRICTION, RIGID_STIFFNESS_FACTOR
+from .materials import MATERIALS, PROP_FRICTION, TWIN_MAX_CONVEX_PARTS
 from .shapes import object_parts
 from .tetmesh import tet_quality, tetrahedralize
 
@@ -99,13 +100,55 @@ def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION)
                         "volume_error": _r(q["total_volume"] / volume - 1.0, 9)},
     }
     _atomic_bytes(d / "card.json", _json_bytes(card))
-    twin = dict(card)
-    rigid_id = card["twin_id"]
-    twin.update(asset_id=rigid_id, twin_id=asset_id, kind="rigid", youngs_modulus=e * RIGID_STIFFNESS_FACTOR)
-    twin["files"] = {"surface": f"../{asset_id}/surface.obj", "tets": f"../{asset_id}/tets.npz",
-                     "visual": [{**p, "file": f"../{asset_id}/{p['file']}"} for p in visual]}
-    _atomic_bytes(out / "objects" / rigid_id / "card.json", _json_bytes(twin))
+    build_twin(card, out)
     return card
+
+
+def build_twin(soft_card: dict, out: Path) -> dict:
+    """The rigid twin of a soft asset: same surface, tets (its evaluation nodes), visuals, density,
+    mass, friction and colour; no elastic constants (PhysX simulates it as a rigid body); convex
+    collision parts from coacd (one hull for the convex primitives, a few for the pastries)."""
+    asset_id = soft_card["asset_id"]
+    rigid_id = soft_card["twin_id"]
+    d = out / "objects" / rigid_id
+    v, f = read_obj(out / "objects" / asset_id / "surface.obj")
+    coll = []
+    for i, (pv, pf) in enumerate(_convex_decomposition(v, f, TWIN_MAX_CONVEX_PARTS)):
+        write_obj(d / f"collision_{i:02d}.obj", pv, pf)
+        coll.append(f"collision_{i:02d}.obj")
+    twin = {k: val for k, val in soft_card.items() if k not in ("youngs_modulus", "poisson_ratio", "damping")}
+    twin.update(asset_id=rigid_id, twin_id=asset_id, kind="rigid",
+                rest_pose=_r(stable_rest_pose([read_obj(d / c) for c in coll])))
+    twin["files"] = {"surface": f"../{asset_id}/surface.obj", "tets": f"../{asset_id}/tets.npz",
+                     "visual": [{**p, "file": f"../{asset_id}/{p['file']}"} for p in soft_card["files"]["visual"]],
+                     "collision": coll}
+    _atomic_bytes(d / "card.json", _json_bytes(twin))
+    return twin
+
+
+def stable_rest_pose(parts) -> np.ndarray:
+    """Pose [p, q_wxyz] that sets a rigid body (convex ``parts`` [(vertices, faces), ...], uniform
+    density) resting on a table: the stable pose nearest to the modelled orientation, bottom at
+    z = 0. A soft asset sags onto its supports; its rigid twin, modelled in the same orientation,
+    may stand on a vertex or an edge (the faceted ball, the lying cylinder) and roll away.
+    trimesh's stable poses (sigma 0: deterministic) are the hull faces the centre of mass
+    projects into."""
+    import trimesh
+    from trimesh.poses import compute_stable_poses
+    from trimesh.transformations import quaternion_from_matrix
+
+    meshes = [trimesh.Trimesh(v, f) for v, f in parts]
+    com = sum(m.center_mass * m.volume for m in meshes) / sum(m.volume for m in meshes)
+    hull = trimesh.util.concatenate(meshes).convex_hull
+    transforms, _ = compute_stable_poses(hull, center_mass=com, sigma=0.0, n_samples=1)
+    angle = [np.arccos(np.clip((np.trace(t[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)) for t in transforms]
+    t = transforms[int(np.argmin(angle))]
+    rotated = hull.vertices @ t[:3, :3].T
+    # Keep the object where it was in xy (its footprint's centre), bottom on the table.
+    lo, hi = hull.vertices.min(axis=0), hull.vertices.max(axis=0)
+    rlo, rhi = rotated.min(axis=0), rotated.max(axis=0)
+    p = np.array([*(0.5 * (lo + hi) - 0.5 * (rlo + rhi))[:2], -rlo[2]])
+    return np.concatenate([p, quaternion_from_matrix(t)])
 
 
 # ------------------------------------------------------------------------------------ props
@@ -146,11 +189,11 @@ def _plate_solid(radius=0.09, floor=0.006, rim_height=0.018, flat=0.065, section
     return np.asarray(m.vertices), np.asarray(m.faces)
 
 
-def _convex_decomposition(v, f):
+def _convex_decomposition(v, f, max_parts: int = 16):
     import coacd
 
     coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(v, f), threshold=0.05, seed=0, max_convex_hull=16)
+    parts = coacd.run_coacd(coacd.Mesh(v, f), threshold=0.05, seed=0, max_convex_hull=max_parts)
     return sorted(((np.asarray(pv), np.asarray(pf)) for pv, pf in parts), key=lambda p: tuple(p[0].mean(axis=0).round(6)))
 
 

@@ -1,7 +1,8 @@
 """Asset cards: one JSON file per object and per prop, validated on load.
 
 Objects live in ``assets/objects/<asset_id>/card.json``; rigid twins have their own card that
-points at the soft asset's files. Props live in ``assets/props/<name>/card.json``.
+points at the soft asset's files (surface, tets, visuals) and lists their own convex collision
+parts; a twin has no elastic constants (it is a PhysX rigid body). Props live in ``assets/props/<name>/card.json``.
 """
 
 from __future__ import annotations
@@ -35,9 +36,10 @@ _REBUILD = "rebuild the assets with: python -m mani_skill_softvt.assets.build"
 
 _OBJECT_FIELDS = {
     "asset_id": str, "twin_id": str, "kind": str, "description": str, "dimensions": list, "volume": float,
-    "mass": float, "density": float, "youngs_modulus": float, "poisson_ratio": float, "damping": float,
-    "friction": float, "color": list, "resolution": int, "files": dict, "counts": dict,
+    "mass": float, "density": float, "friction": float, "color": list, "resolution": int, "files": dict,
+    "counts": dict,
 }
+_SOFT_FIELDS = {"youngs_modulus": float, "poisson_ratio": float, "damping": float}
 
 
 def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -89,9 +91,9 @@ class AssetCard:
     volume: float  # m^3
     mass: float  # kg = density * volume
     density: float
-    youngs_modulus: float
-    poisson_ratio: float
-    damping: float
+    youngs_modulus: float | None  # None for a rigid twin (as are poisson_ratio and damping)
+    poisson_ratio: float | None
+    damping: float | None
     friction: float
     color: tuple  # RGBA of the body
     resolution: int
@@ -99,6 +101,16 @@ class AssetCard:
     tet_file: Path
     visual_parts: tuple  # ((name, path, rgba), ...): body first, then decorations
     counts: dict
+    collision_files: tuple = ()  # rigid twins: convex parts (OBJ), object frame
+    rest_pose: tuple | None = None  # rigid twins: [p, q_wxyz] of the object frame resting on a table
+
+    @property
+    def rigid(self) -> bool:
+        return self.kind == "rigid"
+
+    def convex_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Convex collision parts of a rigid twin: [(vertices, faces), ...] in the object frame."""
+        return [read_obj(p) for p in self.collision_files]
 
     def surface_mesh(self):
         import trimesh
@@ -111,8 +123,11 @@ class AssetCard:
             return d["vertices"].astype(np.float64), d["tets"].astype(np.int32)
 
     def material(self):
+        """The FEM material of a soft asset (a rigid twin has none)."""
         from ..physics.fem import SoftMaterial
 
+        if self.rigid:
+            raise ValueError(f"'{self.asset_id}' is a rigid twin (a PhysX rigid body): it has no FEM material")
         return SoftMaterial(self.youngs_modulus, self.poisson_ratio, self.density, self.damping, self.friction)
 
 
@@ -128,21 +143,31 @@ def load_card(asset_id: str, assets_dir: Path = ASSETS_DIR) -> AssetCard:
         raise ValueError(f"card {path} describes '{d['asset_id']}', expected '{asset_id}'")
     if d["kind"] not in ("soft", "rigid"):
         raise ValueError(f"card {path}: kind must be 'soft' or 'rigid', got {d['kind']!r}")
-    if not (d["youngs_modulus"] > 0 and d["density"] > 0 and 0 <= d["poisson_ratio"] < 0.5):
-        raise ValueError(f"card {path}: material values out of range (E > 0, density > 0, 0 <= nu < 0.5)")
+    rigid = d["kind"] == "rigid"
+    if not rigid:
+        _check_fields(d, _SOFT_FIELDS, path)
+        if not (d["youngs_modulus"] > 0 and 0 <= d["poisson_ratio"] < 0.5):
+            raise ValueError(f"card {path}: material values out of range (E > 0, 0 <= nu < 0.5)")
+    if not (d["density"] > 0 and d["mass"] > 0 and d["friction"] >= 0):
+        raise ValueError(f"card {path}: density and mass must be > 0 and friction >= 0")
     files = d["files"]
-    for key in ("surface", "tets", "visual"):
+    if rigid and not (isinstance(d.get("rest_pose"), list) and len(d["rest_pose"]) == 7):
+        raise ValueError(f"card {path}: a rigid twin needs rest_pose [x, y, z, qw, qx, qy, qz]; {_REBUILD}")
+    for key in ("surface", "tets", "visual") + (("collision",) if rigid else ()):
         if key not in files:
             raise ValueError(f"card {path}: files.{key} missing; {_REBUILD}")
     parts = tuple((p["name"], _file(path.parent, p["file"], path), tuple(p["color"])) for p in files["visual"])
     return AssetCard(
         asset_id=asset_id, twin_id=d["twin_id"], kind=d["kind"], description=d["description"],
         dimensions=tuple(d["dimensions"]), volume=float(d["volume"]), mass=float(d["mass"]),
-        density=float(d["density"]), youngs_modulus=float(d["youngs_modulus"]),
-        poisson_ratio=float(d["poisson_ratio"]), damping=float(d["damping"]), friction=float(d["friction"]),
+        density=float(d["density"]), youngs_modulus=None if rigid else float(d["youngs_modulus"]),
+        poisson_ratio=None if rigid else float(d["poisson_ratio"]), damping=None if rigid else float(d["damping"]),
+        friction=float(d["friction"]),
         color=tuple(d["color"]), resolution=int(d["resolution"]),
         surface_file=_file(path.parent, files["surface"], path), tet_file=_file(path.parent, files["tets"], path),
         visual_parts=parts, counts=dict(d["counts"]),
+        collision_files=tuple(_file(path.parent, f, path) for f in files.get("collision", ())) if rigid else (),
+        rest_pose=tuple(float(x) for x in d["rest_pose"]) if rigid else None,
     )
 
 

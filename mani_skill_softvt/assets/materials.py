@@ -28,12 +28,10 @@ Where the orders of magnitude come from (literature ranges, rounded; not fitted 
 - ``damping`` is Newton's tet viscosity k_damp [Pa*s] on the strain rate; ~1 Pa*s gives a
   strain relaxation time k_damp/E ~ 10 us, enough to kill FEM ringing without creep.
 
-Rigid twins share mesh, texture, density and therefore mass; their modulus is raised by
-``RIGID_STIFFNESS_FACTOR`` (x5, 0.35-0.75 MPa: hard rubber) so the Panda's 10 N grasp deforms them
-several times less than their soft asset (a small fraction of its tolerance; tested). Stiffer twins
-cost more than they give: at x10 the one-tick-late pad coupling starts to ring and VBD needs far
-more substeps to resolve pad friction (the x10 ball and bun slipped out of the grasp even at
-4 substeps x 10 iterations; x5 holds at 8 x 5, see ``physics.constants.NEWTON_SUBSTEPS_STIFF``).
+Rigid twins share mesh, texture, density and therefore mass, and friction; they are PhysX rigid
+bodies (no elastic constants), collided through a convex decomposition of the same surface
+(``TWIN_MAX_CONVEX_PARTS`` coacd hulls at most). Earlier twins were FEM bodies x5 stiffer than
+their soft asset: they still deformed (the expert's R_max had median 0.15) and cost 8 substeps.
 """
 
 from __future__ import annotations
@@ -52,7 +50,7 @@ MATERIALS = {
     "soft_pastry010": (320.0, 9.0e+04, 0.30, 1.0, 0.9),
 }
 
-RIGID_STIFFNESS_FACTOR = 5.0
+TWIN_MAX_CONVEX_PARTS = 8
 
 # Props (rigid, simulated by SAPIEN; Newton sees them as colliders).
 PROP_FRICTION = {"table": 0.6, "basket": 0.7, "plate": 0.5, "distractor": 0.6}

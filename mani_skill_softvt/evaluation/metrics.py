@@ -43,19 +43,19 @@ def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tup
 
 
 def tolerance_violated(record: dict) -> bool:
-    """The episode deformed its object beyond tolerance: R_max > 1 on a deformable suite, or the
-    FEM blew up (``sim_unstable``: crushed or torn, whatever R_max was before)."""
+    """The episode deformed its object beyond tolerance: R_max > 1, or the FEM blew up
+    (``sim_unstable``: crushed or torn, whatever R_max was before)."""
     if record.get("termination") == "sim_unstable":
         return True
-    return not record.get("rigid") and record.get("r_max") is not None and float(record["r_max"]) > 1.0
+    return record.get("r_max") is not None and float(record["r_max"]) > 1.0
 
 
 def summarize(records: list[dict]) -> dict:
     """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals; how the
     episodes ended (``terminations``) and how many violated their tolerance.
 
-    ``records`` need ``success`` and ``r_max`` (rigid suites: ``dsr_success`` given explicitly;
-    ``r_max`` None: not measured, e.g. a worker died).
+    ``records`` need ``success`` and ``r_max`` (``r_max`` None: not measured, e.g. a worker
+    died); a record's own ``dsr_success`` is used where it has one.
     """
     n = len(records)
     t = sum(bool(r["success"]) for r in records)
@@ -94,5 +94,5 @@ def rescore_record(record: dict, tau_new: float) -> dict:
         return dict(record, tau_o=tau_new)
     peak = r_max(deformation_ratio(record["deformation_trace"], tau_new))
     out = dict(record, tau_o=tau_new, r_max=peak)
-    out["dsr_success"] = record["success"] if record.get("rigid") else dsr_success(record["success"], peak)
+    out["dsr_success"] = dsr_success(record["success"], peak)
     return out

@@ -144,7 +144,8 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
                 termination = "success" if info["task_success"] else "dropped" if bool(info["dropped"][0]) else "timeout"
                 break
     material = u.object_material(u.target_instance)
-    receipt = {"youngs_modulus": float(material["youngs_modulus"]), "mass": float(material["mass"]),
+    e = material["youngs_modulus"]  # None for a rigid twin
+    receipt = {"youngs_modulus": None if e is None else float(e), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
                "privileged": privileged}

@@ -17,8 +17,9 @@ class DSRWrapper(gym.Wrapper):
     - ``deformation_ratio``: R_t = D_t / tau_o of the instructed object,
     - ``r_max``: max R_t so far this episode,
     - ``task_success``: the env's kinematic success,
-    - ``dsr_success``: task success with R_max <= 1 (rigid suites: equal to task success, the
-      paper's construction; their R_t is still reported).
+    - ``dsr_success``: task success with R_max <= 1, on every suite. Rigid twins are PhysX rigid
+      bodies, so their R_max is ~0 and DSR equals TSR there by physics (the paper's premise), not
+      by a special case.
 
     tau_o comes from the calibration card of the task's soft asset (rigid twins: their soft
     asset's card), loaded at construction.
@@ -29,7 +30,7 @@ class DSRWrapper(gym.Wrapper):
         task = env.unwrapped.task
         self.calibration_card = load_calibration_card(task.soft_asset_id, calibration_dir)
         self.tau_o = self.calibration_card.tau_o
-        self.rigid = task.rigid
+        self.rigid = task.rigid  # recorded with each episode
         self.r_max = 0.0
         self.deformation_trace: list[float] = []
 
@@ -42,7 +43,7 @@ class DSRWrapper(gym.Wrapper):
         success = bool(info["success"][0])
         info = dict(info)
         info.update(deformation_ratio=r, r_max=self.r_max, task_success=success,
-                    dsr_success=success if self.rigid else dsr_success(success, self.r_max))
+                    dsr_success=dsr_success(success, self.r_max))
         return info
 
     def reset(self, **kwargs):

@@ -18,9 +18,10 @@ SIM_STEPS_PER_CONTROL = SIM_FREQ // CONTROL_FREQ
 # more iterations.
 NEWTON_SUBSTEPS = 4
 VBD_ITERATIONS = 5
-# Stiff bodies (the rigid twins, E >= STIFF_MODULUS) get more substeps, not more iterations: a
-# node's elastic stiffness scales with E and its inertia m/h^2 with substeps^2, so x5 stiffer twins
-# need ~sqrt(5) x the substeps to converge like the soft assets. At 4 x 10 a 20 g bun twin held by
+# Stiff FEM bodies (E >= STIFF_MODULUS, e.g. hard rubber; the package's rigid twins are PhysX rigid
+# bodies and never reach Newton) get more substeps, not more iterations: a node's elastic stiffness
+# scales with E and its inertia m/h^2 with substeps^2, so x5 stiffer bodies need ~sqrt(5) x the
+# substeps to converge like the soft assets. At 4 x 10 a 20 g bun (FEM, x5 stiff) held by
 # 2 x 1 N of pad force (9x its weight at mu 0.9) still slid out during transport; at 8 x 5 (the same
 # 40 sweeps per tick) it holds, and 4 x 20 holds at 1.7x the wall time (measured).
 STIFF_MODULUS = 2.5e5  # Pa

@@ -63,7 +63,7 @@ class SimulationInstabilityError(RuntimeError):
 
 def vbd_schedule(youngs_moduli) -> tuple[int, int]:
     """(Newton substeps per tick, VBD iterations per substep) for a world holding bodies of these
-    moduli (Pa). Stiff bodies (rigid twins) get more substeps so that pad friction converges
+    moduli (Pa). Stiff bodies (hard rubber and up) get more substeps so that pad friction converges
     (see ``constants.NEWTON_SUBSTEPS_STIFF``)."""
     stiff = any(float(e) >= C.STIFF_MODULUS for e in youngs_moduli)
     return (C.NEWTON_SUBSTEPS_STIFF if stiff else C.NEWTON_SUBSTEPS), C.VBD_ITERATIONS

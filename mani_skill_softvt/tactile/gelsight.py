@@ -4,7 +4,8 @@
 the env builds one :class:`GelSight` per config in its sensor setup. Each capture renders the
 finger's frame from three callables the env hands over: the contact surface (the deformed
 object meshes, world frame), the pad's 4x4 world pose and the simulated normal force on the pad
-given that pose (it sets how deep the gel sinks, :mod:`.gel`). The sensor itself holds no simulator
+given that pose (it sets how deep the gel sinks, :mod:`.gel`), and whether the objects are FEM
+bodies or rigid twins (which gel model applies). The sensor itself holds no simulator
 handle, so the optics (:class:`~mani_skill_softvt.tactile.sensor.TactileSensor`) stay pure.
 
 Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "marker_initial": (1, 99, 2)
@@ -43,8 +44,10 @@ class GelSight(BaseSensor):
     config: GelSightConfig
 
     def __init__(self, config: GelSightConfig, contact_surface: Callable[[], tuple[np.ndarray, np.ndarray]],
-                 pad_pose: Callable[[], np.ndarray], normal_force: Callable[[np.ndarray], float] | None = None):
+                 pad_pose: Callable[[], np.ndarray], normal_force: Callable[[np.ndarray], float] | None = None,
+                 deformable: bool = True):
         super().__init__(config)
+        self.deformable = deformable  # FEM surfaces (pressure indentation) or rigid twins (force balance)
         self.renderer = TactileSensor(config.side, pad_half_extents=config.pad_half_extents)
         self._contact_surface = contact_surface
         self._pad_pose = pad_pose
@@ -64,7 +67,7 @@ class GelSight(BaseSensor):
         vertices, faces = self._contact_surface()
         pose = self._pad_pose()
         force = None if self._normal_force is None else self._normal_force(pose)
-        self.frame = self.renderer.render(vertices, faces, pose, force)
+        self.frame = self.renderer.render(vertices, faces, pose, force, self.deformable)
 
     def get_obs(self, **kwargs) -> dict[str, torch.Tensor]:
         if self.frame is None:

@@ -22,7 +22,7 @@ from mani_skill.utils.registration import register_env
 
 from ..assets import load_card
 from . import constants as C
-from .soft_body_env import SoftBodyEnv, SoftObjectSpec
+from .soft_body_env import SoftBodyEnv, ObjectSpec
 
 DEFAULT_ASSET = "soft_stw_cube_hq"
 NOMINAL_XY = np.array([0.0, 0.0])
@@ -34,8 +34,8 @@ class SoftGraspLiftEnv(SoftBodyEnv):
         self.asset_card = load_card(asset_id)
         super().__init__(*args, **kwargs)
 
-    def _soft_object_specs(self):
-        return [SoftObjectSpec.from_card("object", self.asset_card)]
+    def _object_specs(self):
+        return [ObjectSpec.from_card("object", self.asset_card)]
 
     def _initialize_task(self, env_idx, options):
         rng = self._episode_rng

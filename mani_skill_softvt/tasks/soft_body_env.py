@@ -1,6 +1,6 @@
 """Base class of every SoftVT environment: ManiSkill scene + Newton FEM soft bodies in lockstep.
 
-Subclasses declare their soft objects (:meth:`SoftBodyEnv._soft_object_specs`), load the rest
+Subclasses declare their objects (:meth:`SoftBodyEnv._object_specs`), load the rest
 of the scene (:meth:`SoftBodyEnv._load_props`) and place things per episode
 (:meth:`SoftBodyEnv._initialize_task`). This class owns what every task shares:
 
@@ -15,6 +15,9 @@ of the scene (:meth:`SoftBodyEnv._load_props`) and place things per episode
 - the physical factors of a reset (``options``: an ``ood`` condition or ``youngs_modulus_scale``,
   ``mass_scale``, ``light_intensity``), resolved once and applied in one place
   (:meth:`SoftBodyEnv.apply_factors`), without rebuilding kernels;
+- rigid twins instead of soft objects (``ObjectSpec.rigid``): PhysX rigid bodies with the card's
+  convex parts, mass, friction and colour, read through the same node accessors
+  (:mod:`mani_skill_softvt.physics.rigid`); a scene of twins builds no Newton world at all;
 - a GelSight Mini on each finger, a ManiSkill sensor configured like the cameras
   (:attr:`SoftBodyEnv._default_tactile_configs`), observed in ``+tactile`` obs modes;
 - instability detection (NaN, inverted tets, exploding velocities) after every control step.
@@ -42,6 +45,7 @@ from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.deformation import deformation
 from ..physics.fem import SoftBodyWorld, SoftMaterial, vbd_schedule
+from ..physics.rigid import RigidObject, rigid_nodes
 from ..physics.transforms import pose_wxyz_to_matrix
 from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.geometry import contact_polygons, polygons_mask
@@ -56,24 +60,39 @@ TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plu
 
 
 @dataclass
-class SoftObjectSpec:
-    """A soft object of a scene: rest tet mesh in its local frame, material, display colour."""
+class ObjectSpec:
+    """An object of a scene: rest tet mesh in its local frame (a rigid twin's evaluation nodes),
+    material (None for a rigid twin), display colour; a rigid twin's PhysX body."""
 
     name: str
     vertices: np.ndarray  # (N, 3) m, local frame, bottom at z = 0
     tets: np.ndarray  # (M, 4)
-    material: SoftMaterial
+    material: SoftMaterial | None
     color: tuple = (0.9, 0.85, 0.7, 1.0)
     # Visual meshes drawn deformed with the body: [(vertices (local), faces, rgba), ...].
     # Empty: draw the tet mesh's own boundary in ``color``.
     visual_parts: list = field(default_factory=list)
+    # Rigid twin (PhysX rigid body): convex collision parts and visual meshes as files, mass, friction.
+    rigid: bool = False
+    rest_pose: tuple | None = None  # [p, q_wxyz] of the modelled shape in the body frame
+    collision_files: tuple = ()
+    visual_files: tuple = ()  # ((path, rgba), ...)
+    mass: float | None = None
+    density: float | None = None
+    friction: float | None = None
 
     @classmethod
-    def from_card(cls, name: str, card) -> "SoftObjectSpec":
+    def from_card(cls, name: str, card) -> "ObjectSpec":
         """Spec of an asset card (soft object or rigid twin)."""
         from ..assets.cards import read_obj
 
         v, t = card.tet_mesh()
+        if card.rigid:
+            # The twin's body frame rests it on a stable face (card.rest_pose); its nodes follow.
+            return cls(name, rigid_nodes(v, np.asarray(card.rest_pose)), t, None, tuple(card.color), rigid=True,
+                       rest_pose=card.rest_pose, collision_files=card.collision_files,
+                       visual_files=tuple((path, rgba) for _, path, rgba in card.visual_parts), mass=card.mass,
+                       density=card.density, friction=card.friction)
         parts = [(*read_obj(path), rgba) for _, path, rgba in card.visual_parts]
         return cls(name, v, t, card.material(), tuple(card.color), parts)
 
@@ -106,8 +125,10 @@ class SoftBodyEnv(BaseEnv):
         kwargs.setdefault("render_backend", "cpu")
         if kwargs["sim_backend"] not in ("physx_cpu", "cpu"):
             raise ValueError(f"SoftVT envs need sim_backend='physx_cpu' (got {kwargs['sim_backend']!r})")
-        self._world: SoftBodyWorld | None = None
+        self._world: SoftBodyWorld | None = None  # None in a scene of rigid twins
         self._coupling: SapienNewtonCoupling | None = None
+        self._soft_index: dict[str, int] = {}  # soft object name -> Newton body index
+        self._rigid: dict[str, RigidObject] = {}  # rigid twin name -> PhysX body
         self._render_entities: dict[str, sapien.Entity] = {}
         self._x0: dict[str, np.ndarray] = {}
         self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
@@ -147,7 +168,8 @@ class SoftBodyEnv(BaseEnv):
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
         self._tactile = {cfg.side: GelSight(cfg, self.contact_surface, lambda side=cfg.side: self.pad_pose(side),
-                                            lambda pose, side=cfg.side: self.pad_normal_force(side, pose))
+                                            lambda pose, side=cfg.side: self.pad_normal_force(side, pose),
+                                            deformable=not self._rigid)
                          for cfg in self._default_tactile_configs}
         if self.tactile_enabled:
             # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
@@ -167,7 +189,8 @@ class SoftBodyEnv(BaseEnv):
         super()._load_agent(options, sapien.Pose(p=C.ROBOT_BASE_POSE[:3], q=C.ROBOT_BASE_POSE[3:]))
 
     # ------------------------------------------------------------------ subclass hooks
-    def _soft_object_specs(self) -> list[SoftObjectSpec]:
+    def _object_specs(self) -> list[ObjectSpec]:
+        """The scene's objects: all soft, or all rigid twins."""
         raise NotImplementedError
 
     def _load_props(self, options: dict) -> list[PropCollider]:
@@ -175,7 +198,7 @@ class SoftBodyEnv(BaseEnv):
         return []
 
     def _initialize_task(self, env_idx: torch.Tensor, options: dict) -> dict[str, np.ndarray]:
-        """Place robot and props; return each soft object's rest pose [p, q_wxyz] (bottom at p)."""
+        """Place robot and props; return each object's rest pose [p, q_wxyz] (bottom at p)."""
         raise NotImplementedError
 
     # ------------------------------------------------------------------ scene
@@ -194,20 +217,42 @@ class SoftBodyEnv(BaseEnv):
         b.add_box_visual(half_size=he, pose=pose, material=sapien.render.RenderMaterial(base_color=[0.55, 0.42, 0.3, 1]))
         b.initial_pose = sapien.Pose()
         self.table = b.build_kinematic(name="table")
-        self._specs = {s.name: s for s in self._soft_object_specs()}
+        specs = self._object_specs()
+        if len({s.rigid for s in specs}) > 1:
+            # One tactile model per frame (gel over an FEM surface, or force balance on a rigid one).
+            raise ValueError(f"a scene's objects must be all soft or all rigid twins, got {[(s.name, s.rigid) for s in specs]}")
+        self._specs = {s.name: s for s in specs}
         self._props = self._load_props(options)
         sub_scene = self.scene.sub_scenes[0]
-        for spec in self._specs.values():
+        for k, spec in enumerate(s for s in specs if s.rigid):
+            self._rigid[spec.name] = self._build_rigid_object(spec, k)
+        for spec in (s for s in specs if not s.rigid):
             entity = sapien.Entity()
             entity.set_name(f"soft/{spec.name}")
             sub_scene.add_entity(entity)
             self._render_entities[spec.name] = entity
         self._boundary = {n: surface_of_tets(spec.tets) for n, spec in self._specs.items()}
-        # What is drawn for each object: (rest vertices, faces, rgba, embedding tet index, weights).
+        # What is drawn for each soft object: (rest vertices, faces, rgba, embedding tet index, weights).
         self._visuals = {}
-        for n, spec in self._specs.items():
+        for n, spec in ((n, s) for n, s in self._specs.items() if not s.rigid):
             parts = spec.visual_parts or [(spec.vertices, surface_of_tets(spec.tets), spec.color)]
             self._visuals[n] = [(f, rgba, *embed_points(v, spec.vertices, spec.tets)) for v, f, rgba in parts]
+
+    def _build_rigid_object(self, spec: ObjectSpec, k: int) -> RigidObject:
+        """A rigid twin as ManiSkill builds any object: convex parts with the card's friction and
+        density, visual meshes in their colours; then exactly the card's mass."""
+        b = self.scene.create_actor_builder()
+        material = sapien.physx.PhysxMaterial(static_friction=spec.friction, dynamic_friction=spec.friction,
+                                              restitution=0.0)
+        shape_pose = sapien.Pose(p=spec.rest_pose[:3], q=spec.rest_pose[3:])
+        for path in spec.collision_files:
+            b.add_convex_collision_from_file(str(path), pose=shape_pose, material=material, density=spec.density)
+        for path, rgba in spec.visual_files:
+            b.add_visual_from_file(str(path), pose=shape_pose,
+                                   material=sapien.render.RenderMaterial(base_color=list(rgba), roughness=0.8))
+        b.initial_pose = sapien.Pose(p=[0.0, 2.0 + 0.2 * k, 0.5])  # out of the way until the episode places it
+        actor = b.build(name=spec.name)
+        return RigidObject(spec.name, actor._bodies[0], spec.vertices, spec.mass)
 
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
@@ -215,9 +260,14 @@ class SoftBodyEnv(BaseEnv):
 
     def _build_soft_world(self):
         self._set_finger_inertia()
-        substeps, iterations = vbd_schedule(s.material.youngs_modulus for s in self._specs.values())
+        soft = [s for s in self._specs.values() if not s.rigid]
+        self._soft_index = {s.name: i for i, s in enumerate(soft)}
+        if not soft:
+            self._world = self._coupling = None  # rigid twins only: PhysX does everything
+            return
+        substeps, iterations = vbd_schedule(s.material.youngs_modulus for s in soft)
         world = SoftBodyWorld(substeps=substeps, iterations=iterations, sleeping=self.soft_sleep)
-        for spec in self._specs.values():
+        for spec in soft:
             world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
         bodies = []
         robot_links = {link.name: link._objs[0] for link in self.agent.robot.get_links()}
@@ -270,12 +320,8 @@ class SoftBodyEnv(BaseEnv):
         if missing:
             raise RuntimeError(f"_initialize_task did not place soft objects {sorted(missing)}")
         self.apply_factors(factors)
-        for i, name in enumerate(self._specs):
-            # Spawn a hair above the support so the object settles onto it instead of starting in contact.
-            p = np.asarray(poses[name], dtype=np.float64).copy()
-            p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
-            self._world.set_soft_body_pose(i, p)
-        self._coupling.teleport()
+        for name in self._specs:
+            self._place(name, poses[name])
         self.settle()
         self._update_render_meshes()
         for sensor in self._tactile.values():
@@ -284,7 +330,10 @@ class SoftBodyEnv(BaseEnv):
     def apply_factors(self, factors: PhysicalFactors) -> None:
         """The one place where an episode's physical factors take effect: Young's modulus and mass
         of every soft body (rescaled in place, no kernel rebuilt) and the light intensity."""
-        self._world.scale_materials(youngs_modulus=factors.youngs_modulus_scale, mass=factors.mass_scale)
+        if self._world is not None:
+            self._world.scale_materials(youngs_modulus=factors.youngs_modulus_scale, mass=factors.mass_scale)
+        for obj in self._rigid.values():
+            obj.scale_mass(factors.mass_scale)  # a rigid body has no modulus to scale
         s = factors.light_intensity / C.NOMINAL_LIGHT_INTENSITY
         for light, nominal in self._lights:
             light.color = (nominal * s).tolist()
@@ -300,25 +349,42 @@ class SoftBodyEnv(BaseEnv):
         """Let the soft objects come to rest on their supports (Newton only, robot frozen).
 
         The settled node positions become x_0 for the deformation metric, so the expert and the
-        evaluator both start from the settled state (paper appendix, Assets).
+        evaluator both start from the settled state (paper appendix, Assets). Rigid twins settle
+        the same way in PhysX (a faceted ball placed on a vertex would roll away otherwise), with
+        the robot held at its reset joint state.
         """
         world = self._world
         ticks, max_ticks = 0, int(max_time * C.SIM_FREQ)
         min_ticks = C.SIM_FREQ // 10
+        if world is None:
+            robot = self.agent.robot
+            qpos, qvel = robot.get_qpos().clone(), robot.get_qvel().clone()
         while True:
-            world.step()
             # Settling is not part of the episode's physics: drain kinetic energy so that
             # neutrally stable shapes (the ball) stop rocking instead of ringing for seconds.
-            world.damp_velocities(C.SETTLE_VELOCITY_DAMPING)
+            if world is None:
+                self.scene.step()
+                robot.set_qpos(qpos)
+                robot.set_qvel(qvel)
+                for obj in self._rigid.values():
+                    obj.damp_velocities(C.SETTLE_VELOCITY_DAMPING)
+                v = max(obj.speed() for obj in self._rigid.values())
+            else:
+                world.step()
+                world.damp_velocities(C.SETTLE_VELOCITY_DAMPING)
+                v = max(float(np.abs(world.particle_qd(i)).max()) for i in self._soft_index.values())
             ticks += 1
-            v = max(float(np.abs(world.particle_qd(i)).max()) for i in range(len(self._specs)))
             if ticks >= min_ticks and v < speed:
                 break
             if ticks >= max_ticks:
                 break
+        if world is None:
+            self._x0 = {name: obj.nodes() for name, obj in self._rigid.items()}
+            self.settle_info = {"ticks": ticks, "max_node_speed": v, "settled": v < speed}
+            return self.settle_info
         world.check_health()
         world.wake()  # the episode starts awake; it may fall asleep in its own first ticks
-        self._x0 = {name: world.particle_q(i) for i, name in enumerate(self._specs)}
+        self._x0 = {name: world.particle_q(i) for name, i in self._soft_index.items()}
         self._coupling.wrenches[:] = 0.0
         world.time = 0.0
         self.settle_info = {"ticks": ticks, "max_node_speed": v, "settled": v < speed}
@@ -354,18 +420,21 @@ class SoftBodyEnv(BaseEnv):
         return action if isinstance(action, (np.ndarray, torch.Tensor)) else a.astype(np.float32)
 
     def _before_simulation_step(self):
-        self._coupling.before_sapien_step()
+        if self._coupling is not None:
+            self._coupling.before_sapien_step()
 
     def _after_simulation_step(self):
-        self._coupling.after_sapien_step()
+        if self._coupling is not None:
+            self._coupling.after_sapien_step()
 
     def _after_control_step(self):
-        self._world.check_health()
+        if self._world is not None:
+            self._world.check_health()
         self._update_render_meshes()
 
     def _update_render_meshes(self):
-        for i, (name, entity) in enumerate(self._render_entities.items()):
-            nodes = self._world.particle_q(i)
+        for name, entity in self._render_entities.items():
+            nodes = self._world.particle_q(self._soft_index[name])
             tets = self._specs[name].tets
             body = sapien.render.RenderBodyComponent()
             for faces, rgba, tet_idx, weights in self._visuals[name]:
@@ -385,10 +454,11 @@ class SoftBodyEnv(BaseEnv):
     # ------------------------------------------------------------------ tactile
     def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
         """World vertices and faces of every object's deformed FEM boundary: the surface the pads
-        actually touch (the finer visual mesh is embedded and may sit slightly outside it)."""
+        actually touch (the finer visual mesh is embedded and may sit slightly outside it). For
+        rigid twins: the same boundary carried by the body's pose."""
         verts, faces, offset = [], [], 0
-        for i, name in enumerate(self._specs):
-            nodes = self._world.particle_q(i)
+        for name in self._specs:
+            nodes = self._nodes(name)
             verts.append(nodes)
             faces.append(self._boundary[name] + offset)
             offset += len(nodes)
@@ -408,8 +478,10 @@ class SoftBodyEnv(BaseEnv):
         normal = centre[other] - centre[side]
         normal /= np.linalg.norm(normal)
         # Gel surface: the pad's inner face, moved out to where touching FEM nodes rest (their
-        # contact radius): the object's surface reaches it exactly when it touches the pad.
-        face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + PC.PARTICLE_RADIUS)
+        # contact radius): the object's surface reaches it exactly when it touches the pad. PhysX
+        # bodies (rigid twins) rest on the face itself.
+        radius = 0.0 if self._world is None else PC.PARTICLE_RADIUS
+        face = centre[side] + normal * (C.FINGERTIP_HALF_EXTENTS[1] + radius)
         return finger_pad_frame(side, face, normal, hand[:3, 0].astype(np.float64))
 
     def pad_normal_force(self, side: str, pad_pose: np.ndarray | None = None) -> float:
@@ -417,16 +489,23 @@ class SoftBodyEnv(BaseEnv):
         the finger along the pad normal (the part pulling the pad outwards, never negative).
         ``pad_pose``: that pad's pose if the caller has it already."""
         normal = (self.pad_pose(side) if pad_pose is None else pad_pose)[:3, 2]  # pad -> object
-        return max(0.0, -float(self._coupling.wrench(f"panda_{side}finger")[:3] @ normal))
+        return max(0.0, -float(self._contact_wrenches()[f"panda_{side}finger"][:3] @ normal))
 
     def tactile_contact_reference(self, side: str) -> np.ndarray:
         """Evaluator-only reference for the ``side`` sensor: (240, 320) bool, the objects' FEM
         surface at or past the pad within the gel's view, by exact polygon clipping
-        (tactile.geometry.contact_polygons), which the rendered patch is checked against."""
+        (tactile.geometry.contact_polygons), which the rendered patch is checked against. A rigid
+        twin does not reach past the pad (PhysX keeps it on the face); its reference is its
+        surface at or past the gel sunk by the last frame's force-balanced depth (the geometric
+        contact of a rigid indenter with the gel)."""
         nodes, faces = self.contact_surface()
-        renderer = self._tactile[side].renderer
-        return polygons_mask(contact_polygons(world_to_pad(nodes, self.pad_pose(side)), faces,
-                                              renderer.view_half_extents))
+        sensor = self._tactile[side]
+        local = world_to_pad(nodes, self.pad_pose(side))
+        if self._rigid:
+            if sensor.frame is None:
+                sensor.capture()
+            local[:, 2] -= sensor.frame.sink
+        return polygons_mask(contact_polygons(local, faces, sensor.renderer.view_half_extents))
 
     def pad_poses(self) -> dict[str, np.ndarray]:
         """Both fingers' pad poses: side -> 4x4 world pose."""
@@ -444,8 +523,9 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ state
     def get_state_dict(self):
-        state = super().get_state_dict()
-        state["soft"] = torch.from_numpy(self._soft_state_vector()[None])
+        state = super().get_state_dict()  # rigid twins are ManiSkill actors: their state is in "actors"
+        if self._world is not None:
+            state["soft"] = torch.from_numpy(self._soft_state_vector()[None])
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
@@ -486,6 +566,9 @@ class SoftBodyEnv(BaseEnv):
         # state is the tail that get_state() appended.
         state = np.asarray(to_numpy(state))
         state = state[None] if state.ndim == 1 else state
+        if self._world is None:
+            super().set_state(torch.from_numpy(state), env_idx)
+            return
         n_soft = self._soft_state_vector().size
         super().set_state(torch.from_numpy(state[:, :-n_soft]), env_idx)
         self._set_soft_state_vector(state[0, -n_soft:])
@@ -512,25 +595,35 @@ class SoftBodyEnv(BaseEnv):
         self._coupling.wrenches = wr
         self._update_render_meshes()
 
+    def _place(self, name: str, pose: np.ndarray) -> None:
+        p = np.asarray(pose, dtype=np.float64).copy()
+        if name in self._rigid:
+            self._rigid[name].set_pose(p)  # PhysX rests it on the support
+            return
+        # Spawn a hair above the support so the object settles onto it instead of starting in contact.
+        p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
+        self._world.set_soft_body_pose(self._soft_index[name], p)
+        self._coupling.teleport()
+
     def place_object(self, name: str, pose: np.ndarray, settle_time: float = 0.0) -> None:
-        """Teleport a soft object, in its rest shape, to ``pose`` [p, q_wxyz] (bottom at p).
+        """Teleport an object, in its rest shape, to ``pose`` [p, q_wxyz] (bottom at p).
 
         For tests and scripted set-ups (success/drop predicates); x_0 is kept. With
-        ``settle_time`` the FEM runs that long with the robot frozen.
+        ``settle_time`` the FEM runs that long with the robot frozen (a rigid twin is placed at
+        rest and has nothing to settle).
         """
-        i = list(self._specs).index(name)
-        p = np.asarray(pose, dtype=np.float64).copy()
-        p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
-        self._world.set_soft_body_pose(i, p)
-        self._coupling.teleport()
-        for _ in range(int(round(settle_time * C.SIM_FREQ))):
-            self._coupling.wrenches = self._world.step()
+        self._index(name)
+        self._place(name, pose)
+        if self._world is not None:
+            for _ in range(int(round(settle_time * C.SIM_FREQ))):
+                self._coupling.wrenches = self._world.step()
         self._update_render_meshes()
 
     @property
     def soft_world_stats(self) -> dict:
-        """Newton ticks simulated and ticks skipped asleep since the env was built (benchmarks, tests)."""
-        return dict(self._world.sleep_stats)
+        """Newton ticks simulated and ticks skipped asleep since the env was built (benchmarks,
+        tests); None in a scene of rigid twins (no Newton world)."""
+        return None if self._world is None else dict(self._world.sleep_stats)
 
     # ------------------------------------------------------------------ evaluator-only
     @property
@@ -549,13 +642,21 @@ class SoftBodyEnv(BaseEnv):
         """Rest shape of a soft object's tet mesh in its local frame (bottom at z = 0)."""
         return self._specs[self.object_names[self._index(name)]].vertices
 
+    def _nodes(self, name: str) -> np.ndarray:
+        if name in self._rigid:
+            return self._rigid[name].nodes()
+        return self._world.particle_q(self._soft_index[name])
+
     def soft_nodes(self, name: str | None = None) -> np.ndarray:
-        """Current FEM node positions (world frame). Evaluator-only."""
-        return self._world.particle_q(self._index(name))
+        """Current FEM node positions (world frame; a rigid twin's carried by its pose). Evaluator-only."""
+        return self._nodes(self.object_names[self._index(name)])
 
     def soft_node_velocities(self, name: str | None = None) -> np.ndarray:
-        """Current FEM node velocities (world frame). Evaluator-only."""
-        return self._world.particle_qd(self._index(name))
+        """Current FEM node velocities (world frame; a rigid twin's from its body velocity). Evaluator-only."""
+        name = self.object_names[self._index(name)]
+        if name in self._rigid:
+            return self._rigid[name].node_velocities()
+        return self._world.particle_qd(self._soft_index[name])
 
     def settled_nodes(self, name: str | None = None) -> np.ndarray:
         """x_0: the nodes after the settle before the episode (world frame). Evaluator-only."""
@@ -565,18 +666,40 @@ class SoftBodyEnv(BaseEnv):
         """D_t of a soft object against its settled nodes x_0. Evaluator-only."""
         return deformation(self.soft_nodes(name), self.settled_nodes(name))
 
+    def _contact_wrenches(self) -> dict[str, np.ndarray]:
+        """Last tick's wrench of the objects on each finger and on the hand (collider name ->
+        [force, torque about the link frame origin], world frame): from the Newton coupling, or
+        for rigid twins from PhysX's contact impulses."""
+        if self._coupling is not None:
+            return {b.name: self._coupling.wrench(b.name) for b in self._coupling.bodies if b.feedback}
+        contacts = self.scene.px.get_contacts()
+        dt = 1.0 / C.SIM_FREQ
+        links = self.agent.robot.links_map
+        out = {}
+        for name in FEEDBACK_LINKS:
+            entity = links[name]._objs[0].entity
+            origin = np.asarray(entity.pose.p, np.float64)
+            out[name] = sum((obj.contact_wrench(contacts, entity, dt, origin) for obj in self._rigid.values()),
+                            np.zeros(6))
+        return out
+
     def pad_wrenches(self) -> dict[str, np.ndarray]:
-        """Last tick's contact wrench of the soft bodies on each finger pad and on the hand:
-        collider name -> [force (3) N, torque (3) N m], world frame."""
-        return {b.name: self._coupling.wrench(b.name).copy() for b in self._coupling.bodies if b.feedback}
+        """Last tick's contact wrench of the objects on each finger pad and on the hand:
+        collider name -> [force (3) N, torque (3) N m about the link frame origin], world frame."""
+        return {name: w.copy() for name, w in self._contact_wrenches().items()}
 
     def pad_forces(self) -> dict[str, float]:
         """Magnitude (N) of the contact force on each finger pad: side -> force."""
-        return {side: float(np.linalg.norm(self._coupling.wrench(f"panda_{side}finger")[:3])) for side in ("left", "right")}
+        w = self._contact_wrenches()
+        return {side: float(np.linalg.norm(w[f"panda_{side}finger"][:3])) for side in ("left", "right")}
 
-    def object_material(self, name: str | None = None) -> dict[str, float]:
-        """Live Young's modulus (Pa) and mass (kg) of a soft object, after any OOD rescaling. Evaluator-only."""
-        i = self._index(name)
+    def object_material(self, name: str | None = None) -> dict[str, float | None]:
+        """Live Young's modulus (Pa; None for a rigid twin) and mass (kg) of an object, after any
+        OOD rescaling. Evaluator-only."""
+        name = self.object_names[self._index(name)]
+        if name in self._rigid:
+            return {"youngs_modulus": None, "mass": self._rigid[name].mass}
+        i = self._soft_index[name]
         h = self._world.soft_bodies[i]
         masses = self._world.model.particle_mass.numpy()[h.particle_start:h.particle_start + h.particle_count]
         return {"youngs_modulus": h.material.youngs_modulus * self._world.material_scale["youngs_modulus"],
@@ -609,6 +732,7 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 _HAND_HULL = None
+FEEDBACK_LINKS = ("panda_leftfinger", "panda_rightfinger", "panda_hand")  # robot links objects push back on
 
 
 def _hand_collision_hull():

@@ -53,7 +53,7 @@ from mani_skill.utils.registration import register_env
 
 from ..assets import load_card, load_prop
 from . import constants as C
-from .soft_body_env import PropCollider, SoftBodyEnv, SoftObjectSpec
+from .soft_body_env import PropCollider, SoftBodyEnv, ObjectSpec
 from .suites import SUITES, TaskSpec, task_spec
 
 OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
@@ -87,9 +87,9 @@ class SoftVTTaskEnv(SoftBodyEnv):
         return self.task.side or "object"
 
     # ------------------------------------------------------------------ scene
-    def _soft_object_specs(self):
+    def _object_specs(self):
         names = ["left", "right"] if self.task.side else ["object"]
-        return [SoftObjectSpec.from_card(n, self.asset_card) for n in names]
+        return [ObjectSpec.from_card(n, self.asset_card) for n in names]
 
     def _load_props(self, options):
         prop = load_prop(self.task.target)
