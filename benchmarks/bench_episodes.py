@@ -5,7 +5,8 @@
 Rows (CPU, one process, 240 Hz physics, 20 Hz control):
 
 - wall seconds per simulated second of one scripted-expert episode (task 3 of each suite,
-  obs_mode state_dict; Object-Soft also without soft-body sleeping, ``soft_sleep=False``),
+  obs_mode state_dict; Object-Soft also without soft-body sleeping, ``soft_sleep=False``; the
+  rigid suites' twins are PhysX rigid bodies),
   against PickCube-v1 physics only (obs_mode state, random actions), and its wall time;
 - milliseconds per idle ``rgb+tactile`` control step per camera (the robot holding still away
   from the object, which sleeps) against PickCube-v1 with one 224x224 camera;
@@ -40,7 +41,7 @@ def expert_episode(suite: str, sleep: bool) -> tuple[float, dict]:
     env = make_env(suite, 3, obs_mode="state_dict", control_mode="pd_ee_pose", soft_sleep=sleep)
     rec = run_episode(env, ScriptedExpertPolicy(), {"suite": suite, "task_id": 3, "condition": "id",
                                                     "seed": id_seed(3, 0)})
-    stats = env.unwrapped.soft_world_stats
+    stats = env.unwrapped.soft_world_stats or {}  # None: rigid twins, no Newton world
     env.close()
     return rec["wall_s"] / (rec["steps"] / 20.0), {**stats, "termination": rec["termination"], "r_max": rec["r_max"],
                                                    "wall_s": rec["wall_s"]}
@@ -97,8 +98,10 @@ def main(argv=None):
         rows.insert(1, ("soft_awake", "object_soft, never sleeping"))
     for key, label in rows:
         v, st = r[key]
+        ticks = (f"ticks asleep {st['ticks_asleep']} of {st['ticks_asleep'] + st['ticks_simulated']}"
+                 if "ticks_asleep" in st else "PhysX rigid bodies, no FEM")
         print(f"{label:<58}{v:>8.2f}{v / pick_phys:>12.1f}{st['wall_s']:>9.1f}   [{st['termination']}, R_max "
-              f"{st['r_max']:.3f}, ticks asleep {st['ticks_asleep']} of {st['ticks_asleep'] + st['ticks_simulated']}]")
+              f"{st['r_max']:.3f}, {ticks}]")
     print(f"\n{'idle rgb+tactile control step, per camera (ms)':<58}{'value':>8}{'x PickCube':>12}")
     for key, label in (("idle_sleep", "sleeping"), ("idle_awake", "never sleeping")):
         v = r[key] * 1e3 / CAMERAS

@@ -4,8 +4,8 @@
 
 Both envs run on the CPU at the lockstep rate (240 Hz physics, 20 Hz control). Rows:
 physics only (obs_mode="state"), with one 224x224 camera rendered every control step
-(obs_mode="rgb"), and physics only on the cube's rigid twin (x5 modulus, 8 Newton substeps instead
-of 4). Prints simulated seconds per wall second and the ratio to PickCube-v1.
+(obs_mode="rgb"), and physics only on the cube's rigid twin (a PhysX rigid body: no Newton world).
+Prints simulated seconds per wall second and the ratio to PickCube-v1.
 The soft-body scene runs the scripted grasp (approach, descend, close, lift, hold), so the
 FEM body is in contact with the table and the pads for most of the measurement.
 """
@@ -77,7 +77,7 @@ def main(argv=None):
     rows, base = [], {}
     for mode, label, asset in (("state", "physics only", DEFAULT_ASSET),
                                ("rgb", "one 224x224 camera", DEFAULT_ASSET),
-                               ("state", "physics only, rigid twin (8 substeps)", twin)):
+                               ("state", "physics only, rigid twin (PhysX)", twin)):
         soft = bench_softvt(mode, args.steps, asset)
         if mode not in base:
             base[mode] = bench_pickcube(mode, args.steps)

@@ -279,7 +279,10 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                 g["env_states"].visititems(lambda k, v: states.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
                 env.reset(seed=int(g.attrs["seed"]))
                 frames = []
-                for t in range(len(states["soft"])):
+                steps = {len(v) for v in states.values()}  # one state per step in every group
+                if len(steps) != 1:
+                    raise CorruptDataError(f"{trajectory_h5}:{name}: env_states groups differ in length {sorted(steps)}")
+                for t in range(steps.pop()):
                     u.set_state_dict(_state_dict_at(states, t))
                     frames.append(_flatten(u.get_obs()))
                 out = dst.create_group(name)

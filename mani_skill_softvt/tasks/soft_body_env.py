@@ -529,6 +529,9 @@ class SoftBodyEnv(BaseEnv):
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
+        if "soft" in state and self._world is None:
+            raise ValueError("this state holds FEM soft-body values but the scene's objects are rigid twins (PhysX "
+                             "bodies): it was recorded before the twins became rigid; regenerate the demonstrations")
         super().set_state_dict(self._changed_rigid_state(state), env_idx)
         if "soft" in state:
             self._set_soft_state_vector(np.asarray(to_numpy(state["soft"]))[0])
