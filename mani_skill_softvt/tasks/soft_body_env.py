@@ -252,6 +252,7 @@ class SoftBodyEnv(BaseEnv):
                                    material=sapien.render.RenderMaterial(base_color=list(rgba), roughness=0.8))
         b.initial_pose = sapien.Pose(p=[0.0, 2.0 + 0.2 * k, 0.5])  # out of the way until the episode places it
         actor = b.build(name=spec.name)
+        actor._bodies[0].set_solver_position_iterations(PC.RIGID_SOLVER_POSITION_ITERATIONS)
         return RigidObject(spec.name, actor._bodies[0], spec.vertices, spec.mass)
 
     def _after_reconfigure(self, options):
