@@ -92,12 +92,17 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
             dilations.append(np.linalg.norm(fr.marker_current - fr.marker_initial, axis=1).mean())
         # Monotone in the grasp force over the envelope.
         assert all(b > a for a, b in zip(forces, forces[1:])), forces
-        checks = [("area", areas), ("indentation volume", volumes)]
+        checks = [("indentation volume", volumes)]
+        if not twin:
+            # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
+            # 1 deg, different in each grasp): its patch area and the markers' dilation (the slope
+            # of the indentation) follow the tilt as much as the force; the volume is F / K.
+            checks.append(("area", areas))
         # Marker dilation follows the slope of the indentation. The lying cylinder's lightest grasp
         # is a narrow stripe whose steep sides move the markers more than its firmer grasps, which
         # press the gel almost evenly across the whole view (the FOTS model, and a real gel, then
         # barely move markers sideways): not monotone there (README, limitations).
-        if asset_id != "soft_stw_cylinder_hq":
+        if asset_id != "soft_stw_cylinder_hq" and not twin:
             checks.append(("marker dilation", dilations))
         for name, values in checks:
             assert spearman(forces, values) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
