@@ -56,6 +56,7 @@ from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
 
 # Reset options: the episode's physical factors, and ManiSkill's own.
 RESET_OPTIONS = frozenset({"ood", *FACTOR_OPTIONS, "reconfigure", "env_idx", "reset_to_env_states"})
+FEEDBACK_LINKS = ("panda_leftfinger", "panda_rightfinger", "panda_hand")  # robot links objects push back on
 TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plus both fingers' GelSight
 
 
@@ -490,7 +491,8 @@ class SoftBodyEnv(BaseEnv):
         the finger along the pad normal (the part pulling the pad outwards, never negative).
         ``pad_pose``: that pad's pose if the caller has it already."""
         normal = (self.pad_pose(side) if pad_pose is None else pad_pose)[:3, 2]  # pad -> object
-        return max(0.0, -float(self._contact_wrenches()[f"panda_{side}finger"][:3] @ normal))
+        link = f"panda_{side}finger"
+        return max(0.0, -float(self._contact_wrenches((link,))[link][:3] @ normal))
 
     def tactile_contact_reference(self, side: str) -> np.ndarray:
         """Evaluator-only reference for the ``side`` sensor: (240, 320) bool, the objects' FEM
@@ -670,17 +672,17 @@ class SoftBodyEnv(BaseEnv):
         """D_t of a soft object against its settled nodes x_0. Evaluator-only."""
         return deformation(self.soft_nodes(name), self.settled_nodes(name))
 
-    def _contact_wrenches(self) -> dict[str, np.ndarray]:
-        """Last tick's wrench of the objects on each finger and on the hand (collider name ->
+    def _contact_wrenches(self, names=FEEDBACK_LINKS) -> dict[str, np.ndarray]:
+        """Last tick's wrench of the objects on the robot links ``names`` (fingers, hand; name ->
         [force, torque about the link frame origin], world frame): from the Newton coupling, or
-        for rigid twins from PhysX's contact impulses."""
+        for rigid twins from PhysX's contact impulses (summed only for the links asked for)."""
         if self._coupling is not None:
-            return {b.name: self._coupling.wrench(b.name) for b in self._coupling.bodies if b.feedback}
+            return {name: self._coupling.wrench(name) for name in names}
         contacts = self.scene.px.get_contacts()
         dt = 1.0 / C.SIM_FREQ
         links = self.agent.robot.links_map
         out = {}
-        for name in FEEDBACK_LINKS:
+        for name in names:
             entity = links[name]._objs[0].entity
             origin = np.asarray(entity.pose.p, np.float64)
             out[name] = sum((obj.contact_wrench(contacts, entity, dt, origin) for obj in self._rigid.values()),
@@ -694,7 +696,7 @@ class SoftBodyEnv(BaseEnv):
 
     def pad_forces(self) -> dict[str, float]:
         """Magnitude (N) of the contact force on each finger pad: side -> force."""
-        w = self._contact_wrenches()
+        w = self._contact_wrenches(("panda_leftfinger", "panda_rightfinger"))
         return {side: float(np.linalg.norm(w[f"panda_{side}finger"][:3])) for side in ("left", "right")}
 
     def object_material(self, name: str | None = None) -> dict[str, float | None]:
@@ -736,7 +738,6 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 _HAND_HULL = None
-FEEDBACK_LINKS = ("panda_leftfinger", "panda_rightfinger", "panda_hand")  # robot links objects push back on
 
 
 def _hand_collision_hull():
