@@ -53,6 +53,7 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
            "instruction": instruction}
     if f"observation/tactile_{TACTILE_SIDES[0]}" in request:
         obs["tactile"] = {side: {"rgb": _batched(request[f"observation/tactile_{side}"], np.uint8),
+                                 "depth": _batched(request[f"observation/tactile_{side}_depth"], np.int16),
                                  **{env_key: _batched(request[f"observation/tactile_{side}_{name}"], np.float32)
                                     for name, env_key in TACTILE_MARKERS.items()}}
                           for side in TACTILE_SIDES}

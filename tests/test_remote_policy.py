@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 LIBERO_KEYS = {"observation/image", "observation/wrist_image", "observation/state", "prompt"}
 LOSSLESS_KEYS = {"observation/qpos", "observation/tcp_pose_world"}
 TACTILE_KEYS = {f"observation/tactile_{s}{k}" for s in ("left", "right")
-                for k in ("", "_markers_initial", "_markers_current")}
+                for k in ("", "_depth", "_markers_initial", "_markers_current")}
 
 
 def _obs(tactile: bool, seed: int = 0) -> dict:
@@ -44,6 +44,7 @@ def _obs(tactile: bool, seed: int = 0) -> dict:
            "instruction": "put the soft cube in the basket"}
     if tactile:
         obs["tactile"] = {s: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 240, 320, 3), dtype=np.uint8)),
+                              "depth": torch.from_numpy(rng.integers(0, 2000, (1, 240, 320), dtype=np.int16)),
                               "marker_initial": torch.from_numpy(rng.uniform(0, 320, (1, 99, 2)).astype(np.float32)),
                               "marker_current": torch.from_numpy(rng.uniform(0, 320, (1, 99, 2)).astype(np.float32))}
                           for s in ("left", "right")}
@@ -101,6 +102,7 @@ def test_openpi_observation_schema(tactile):
     if tactile:
         assert req["observation/tactile_left"].shape == (240, 320, 3) and req["observation/tactile_left"].dtype == np.uint8
         for side in ("left", "right"):
+            np.testing.assert_array_equal(req[f"observation/tactile_{side}_depth"], obs["tactile"][side]["depth"].numpy()[0])
             for name, env_key in (("initial", "marker_initial"), ("current", "marker_current")):
                 m = req[f"observation/tactile_{side}_markers_{name}"]
                 assert m.shape == (99, 2) and m.dtype == np.float32

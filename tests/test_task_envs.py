@@ -1,5 +1,6 @@
 """The four SoftVTBench suites as ManiSkill envs: registration, predicates, seeds, OOD, no leaks."""
 
+import cv2
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.tasks.robot import ee_action
 from mani_skill_softvt.tasks import constants as C
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS, SUITES, list_tasks
+from mani_skill_softvt.tactile.constants import GEL_THICKNESS
 
 ENV_IDS = [s.env_id for s in SUITES.values()]
 
@@ -222,8 +224,10 @@ def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
     for side in ("left", "right"):
         t = obs["tactile"][side]
         assert t["rgb"].shape == (1, 240, 320, 3) and t["marker_current"].shape == (1, 99, 2)
-        # Open gripper, nothing touches the gel: the sensor's reference frame, markers at rest.
+        assert t["depth"].shape == (1, 240, 320) and t["depth"].dtype == torch.int16
+        # Open gripper, nothing touches the gel: the sensor's reference frame, markers at rest, no indentation.
         assert torch.equal(t["marker_current"], t["marker_initial"])
+        assert not t["depth"].any()
     plan = GraspPlan(closure=0.8)
     plan.steps = {**plan.steps, "lift": 0, "hold": 0, "lower": 0, "open": 0, "retreat": 0}
     run_grasp_script(env, plan)
@@ -231,6 +235,13 @@ def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
     for side in ("left", "right"):
         t = obs["tactile"][side]
         assert not torch.equal(t["rgb"], obs_before(env, side)), side
+        # The depth observation is the frame's indentation in micrometres: the pressed patch, within
+        # the gel's thickness, and nothing beyond the contact but the upsampling's one gel cell (2 px).
+        frame = env.unwrapped.tactile_frames()[side]
+        depth_um = t["depth"].numpy()[0].astype(np.float64)
+        np.testing.assert_allclose(depth_um, frame.depth * 1e6, atol=0.5)
+        near_contact = cv2.dilate(frame.contact.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        assert 0 < depth_um.max() <= GEL_THICKNESS * 1e6 and not depth_um[~near_contact].any(), side
     env.close()
 
 

@@ -96,6 +96,7 @@ def to_openpi_observation(obs: dict, instruction: str) -> dict:
     for side in TACTILE_SIDES if "tactile" in obs else ():
         t = obs["tactile"][side]
         out[f"observation/tactile_{side}"] = np.ascontiguousarray(_np(t["rgb"]))
+        out[f"observation/tactile_{side}_depth"] = np.ascontiguousarray(_np(t["depth"]))
         for name, env_key in TACTILE_MARKERS.items():
             out[f"observation/tactile_{side}_{name}"] = _np(t[env_key]).astype(np.float32)
     return out

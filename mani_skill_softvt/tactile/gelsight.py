@@ -8,8 +8,11 @@ given that pose (it sets how deep the gel sinks, :mod:`.gel`), and whether the o
 bodies or rigid twins (which gel model applies). The sensor itself holds no simulator
 handle, so the optics (:class:`~mani_skill_softvt.tactile.sensor.TactileSensor`) stay pure.
 
-Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "marker_initial": (1, 99, 2)
-float32 px, "marker_current": (1, 99, 2) float32 px}``.
+Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "depth": (1, 240, 320) int16 gel
+indentation in micrometres (int16 like ManiSkill's camera depth), "marker_initial": (1, 99, 2) float32 px, "marker_current": (1, 99, 2)
+float32 px}``. The depth map is what a GelSight's photometric-stereo reconstruction gives; it is
+part of the observation because on objects softer than the gel (the foods and foams here) the
+indentation is tens of micrometres and the RGB change is faint (README, tactile).
 """
 
 from __future__ import annotations
@@ -22,6 +25,13 @@ import torch
 from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 
 from .sensor import SIDES, TactileFrame, TactileSensor
+
+DEPTH_UNIT = 1e-6  # m per count of the int16 depth observation (the gel is 2 mm thick: <= 2000 counts)
+
+
+def depth_counts(depth: np.ndarray) -> np.ndarray:
+    """A gel indentation map (m) as the observation's int16 micrometres (rounded, clipped)."""
+    return np.clip(np.rint(np.asarray(depth) / DEPTH_UNIT), 0, np.iinfo(np.int16).max).astype(np.int16)
 
 
 @dataclass
@@ -74,6 +84,7 @@ class GelSight(BaseSensor):
             self.capture()
         f = self.frame
         return {"rgb": torch.from_numpy(f.image[None].copy()),
+                "depth": torch.from_numpy(depth_counts(f.depth)[None]),
                 "marker_initial": torch.from_numpy(f.marker_initial[None].copy()),
                 "marker_current": torch.from_numpy(f.marker_current[None].copy())}
 
