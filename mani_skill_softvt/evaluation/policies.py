@@ -118,10 +118,13 @@ BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPo
 
 
 def load_policy(spec: str) -> Policy:
-    """A built-in policy name, ``module:Class`` of a user policy (constructed without arguments) or
-    ``ws://HOST:PORT`` of a policy server."""
+    """A built-in policy name, ``module:Class`` of a user policy (constructed without arguments),
+    ``ws://HOST:PORT`` of a policy server, or the ``policy.pt`` of a trained baseline."""
     if spec in BUILTIN:
         return BUILTIN[spec]()
+    if spec.endswith(".pt"):  # a trained Diffusion Policy baseline (mani_skill_softvt.baselines)
+        from ..baselines.agent import DiffusionPolicyAgent
+        return DiffusionPolicyAgent(spec)
     if spec.startswith(("ws://", "wss://")):  # a policy server (openpi protocol), see evaluation/remote.py
         from .remote import remote_policy_from_spec
         return remote_policy_from_spec(spec)

@@ -1,0 +1,86 @@
+"""A trained Diffusion Policy baseline as an evaluation policy (``evaluate --policy <policy.pt>``).
+
+It sees every control step's observation (``act`` returns one action at a time, so the two
+observation frames it conditions on are consecutive steps, as in training) and replans every
+``action_steps`` steps: it denoises a 16-step chunk and executes its first 8. Its record names the
+variant (``diffusion_policy[vt-c]``). The sampling noise is seeded by the episode seed, and torch
+runs on one thread here, so an episode is the same bit for bit on a re-run.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..evaluation.policies import Policy
+from .config import DPConfig
+from .features import flatten_env_obs, frame_features
+from .model import DiffusionPolicyModel, noise_scheduler
+from .train import empty_stats, load_checkpoint
+
+GRIPPER = 6  # the action's gripper column
+
+
+def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
+    """The config and the (EMA) model of a ``policy.pt``; a clear error for anything else."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
+                                "`python -m mani_skill_softvt.baselines.train --variant ...` (it writes policy.pt)")
+    ckpt = load_checkpoint(path)
+    if not isinstance(ckpt, dict) or "config" not in ckpt or "model" not in ckpt or "optimizer" in ckpt:
+        raise ValueError(f"{path} is not a baseline policy file (policy.pt written at the end of training); "
+                         "a checkpoint.pt is a training state: finish the run to get policy.pt")
+    cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
+    model = DiffusionPolicyModel(cfg, empty_stats(cfg))
+    model.load_state_dict(ckpt["model"])
+    model.eval()
+    return cfg, model
+
+
+class DiffusionPolicyAgent(Policy):
+    """Closed-loop Diffusion Policy (see the module docstring)."""
+
+    def __init__(self, path: str | Path, threads: int = 1):
+        self.path = Path(path)
+        self.cfg, self.model = load_policy_file(self.path)
+        self.name = f"diffusion_policy[{self.cfg.variant}]"
+        self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"
+        self.scheduler = noise_scheduler(self.cfg, inference=True)
+        self.threads = threads
+        self.history: deque = deque(maxlen=self.cfg.obs_horizon)
+        self.queue: list[np.ndarray] = []
+
+    def reset(self, instruction: str, seed: int) -> None:
+        self.generator = torch.Generator().manual_seed(int(seed))
+        self.history.clear()
+        self.queue = []
+
+    def act(self, obs) -> np.ndarray:
+        if not isinstance(obs, dict) or "sensor_data" not in obs:
+            raise ValueError(f"{self.name} needs camera images: evaluate with --obs-mode {self.obs_mode}")
+        frame = frame_features(flatten_env_obs(obs), self.cfg)
+        if not self.history:  # the first step: its own previous frame, as in training
+            self.history.extend([frame] * (self.cfg.obs_horizon - 1))
+        self.history.append(frame)
+        if not self.queue:
+            self.queue = list(self._plan())
+        return self.queue.pop(0)[None]
+
+    def _plan(self) -> np.ndarray:
+        window = {k: torch.from_numpy(np.stack([f[k] for f in self.history]))[None] for k in self.history[0]}
+        threads = torch.get_num_threads()
+        torch.set_num_threads(self.threads)
+        try:
+            chunk = self.model.sample(window, self.generator, self.scheduler)[0].numpy()
+        finally:
+            torch.set_num_threads(threads)
+        chunk = chunk[:self.cfg.action_steps].astype(np.float32)
+        if self.cfg.binary_gripper:
+            chunk[:, GRIPPER] = (chunk[:, GRIPPER] > 0.5).astype(np.float32)
+        else:
+            chunk[:, GRIPPER] = np.clip(chunk[:, GRIPPER], 0.0, 1.0)
+        return chunk

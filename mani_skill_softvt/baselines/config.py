@@ -1,0 +1,175 @@
+"""One configuration object for the Diffusion Policy baselines, two presets, and overrides.
+
+The paper's appendix "Baseline Training Details" fixes the recipe (``paper``): an image-
+conditioned diffusion U-Net over a 16-step chunk of 7-D actions, 8 executed per replanning, two
+observation frames; ResNet-18 image encoders, one per stream; AdamW (lr 1e-4, betas (0.95,
+0.999), weight decay 1e-6), cosine schedule with 100 warm-up steps, EMA, DDPM with 100 steps for
+training and inference, 20 epochs on 1,000 demonstrations per suite, batch 256 (VO) / 128 (VT) on
+one A100. ``cpu`` keeps the architecture and the recipe but shrinks what costs time on a 2-core
+machine: image size, encoder and U-Net widths, training steps, and the inference steps (DDIM over
+the same 100-step noise schedule). Any field can be overridden (``--set key=value``).
+
+Variants (paper, section "Baseline Training Details"):
+
+======  ===========================================  =================
+name    observation                                  gripper column
+======  ===========================================  =================
+vo-c    third-person + wrist RGB, robot state         continuous
+vt-c    + both tactile images, 792-D marker motion    continuous
+vo-b    as vo-c                                       binary
+vt-b    as vt-c                                       binary
+======  ===========================================  =================
+
+One deliberate difference from the paper, on by default and named here: the tactile streams see
+the GelSight image *and* its depth map (``tactile_inputs="rgb+depth"``). On objects softer than
+the gel the RGB change is faint (README, tactile); ``tactile_inputs="rgb"`` gives the paper's input.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+VARIANTS = ("vo-c", "vt-c", "vo-b", "vt-b")
+PRESETS = ("paper", "cpu")
+TACTILE_INPUTS = ("rgb", "rgb+depth")
+SCHEDULERS = ("ddpm", "ddim")
+
+
+@dataclass(frozen=True)
+class DPConfig:
+    """Everything that defines a Diffusion Policy baseline run (see the module docstring)."""
+
+    variant: str = "vo-c"
+    preset: str = "cpu"
+    # -- interface (paper)
+    obs_horizon: int = 2  # observation frames per prediction
+    action_horizon: int = 16  # actions predicted per chunk
+    action_steps: int = 8  # actions executed before replanning
+    action_dim: int = 7  # base-frame xyz, axis-angle, gripper
+    state_dim: int = 7  # base-frame TCP xyz, axis-angle, gripper width
+    marker_count: int = 99
+    # -- images
+    camera_size: tuple[int, int] = (84, 84)  # (height, width) the two cameras are resized to
+    tactile_size: tuple[int, int] = (60, 80)  # (height, width) of each tactile stream (4:3 like the sensor)
+    tactile_inputs: str = "rgb+depth"
+    depth_scale_um: float = 200.0  # the depth channel is indentation / this (tens of um on soft objects)
+    # -- networks
+    encoder_widths: tuple[int, ...] = (16, 32, 64, 128)  # ResNet stage widths (ResNet-18: 64..512)
+    encoder_blocks: tuple[int, ...] = (1, 1, 1, 1)  # basic blocks per stage (ResNet-18: 2, 2, 2, 2)
+    image_feature_dim: int = 64  # per image stream and frame
+    unet_dims: tuple[int, ...] = (64, 128, 256)  # down-path channels of the 1-D U-Net
+    unet_kernel: int = 5
+    unet_groups: int = 8
+    timestep_embed_dim: int = 64
+    # -- diffusion
+    train_timesteps: int = 100
+    inference_timesteps: int = 16
+    inference_scheduler: str = "ddim"
+    # -- optimisation
+    lr: float = 1e-4
+    betas: tuple[float, float] = (0.95, 0.999)
+    weight_decay: float = 1e-6
+    warmup_steps: int = 100
+    ema_power: float = 0.75  # EMA warm-up: decay = 1 - (1 + step)^-power, at most ema_max_decay (DP's values)
+    ema_max_decay: float = 0.9999
+    batch_size: int = 32
+    epochs: float | None = None  # training length in epochs (paper), or
+    steps: int | None = 3000  # in optimiser steps (cpu); exactly one of the two is set
+    checkpoint_every: int = 250  # optimiser steps between checkpoints (resume point)
+    seed: int = 0
+    threads: int = 2  # torch intra-op threads while training (the machine's cores)
+    # -- data
+    suite: str = "object_soft"
+    tasks: tuple[int, ...] = tuple(range(10))
+    demos_per_task: int | None = None  # None: every accepted demo on disk
+
+    def __post_init__(self):
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant {self.variant!r}: choose one of {VARIANTS}")
+        if self.tactile_inputs not in TACTILE_INPUTS:
+            raise ValueError(f"tactile_inputs {self.tactile_inputs!r}: choose one of {TACTILE_INPUTS}")
+        if self.inference_scheduler not in SCHEDULERS:
+            raise ValueError(f"inference_scheduler {self.inference_scheduler!r}: choose one of {SCHEDULERS}")
+        if (self.epochs is None) == (self.steps is None):
+            raise ValueError(f"set exactly one of epochs ({self.epochs}) and steps ({self.steps})")
+        if not 1 <= self.action_steps <= self.action_horizon:
+            raise ValueError(f"action_steps {self.action_steps} must be within 1..action_horizon {self.action_horizon}")
+        if len(self.encoder_widths) != len(self.encoder_blocks):
+            raise ValueError("encoder_widths and encoder_blocks need one entry per ResNet stage")
+        if self.inference_timesteps > self.train_timesteps:
+            raise ValueError(f"inference_timesteps {self.inference_timesteps} > train_timesteps {self.train_timesteps}")
+
+    @property
+    def tactile(self) -> bool:
+        """Visuo-tactile variant (tactile images and marker motion as inputs)."""
+        return self.variant.startswith("vt")
+
+    @property
+    def binary_gripper(self) -> bool:
+        """Trained on the binary gripper column of the demonstrations (and its output thresholded)."""
+        return self.variant.endswith("-b")
+
+    @property
+    def tactile_channels(self) -> int:
+        return 4 if self.tactile_inputs == "rgb+depth" else 3
+
+    @property
+    def marker_motion_dim(self) -> int:
+        """obs_horizon frames x 2 fingers x markers x 2 (the paper's 792 numbers)."""
+        return self.obs_horizon * 2 * self.marker_count * 2
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+# The appendix's settings (a GPU run; documented, not run here).
+_PAPER = dict(preset="paper", camera_size=(224, 224), tactile_size=(240, 320), encoder_widths=(64, 128, 256, 512),
+              encoder_blocks=(2, 2, 2, 2), image_feature_dim=512, unet_dims=(512, 1024, 2048), timestep_embed_dim=128,
+              train_timesteps=100, inference_timesteps=100, inference_scheduler="ddpm", batch_size=256, epochs=20.0,
+              steps=None, checkpoint_every=1000, threads=0, demos_per_task=100)
+_CPU: dict = dict(preset="cpu")
+
+
+def make_config(variant: str, preset: str = "cpu", **overrides) -> DPConfig:
+    """The ``preset`` configuration of ``variant`` with ``overrides`` applied (field names)."""
+    if preset not in PRESETS:
+        raise ValueError(f"preset {preset!r}: choose one of {PRESETS}")
+    base = dict(_PAPER if preset == "paper" else _CPU)
+    if preset == "paper" and variant.startswith("vt"):
+        base["batch_size"] = 128  # the appendix's VT micro-batch (no accumulation)
+    unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(DPConfig)})
+    if unknown:
+        raise ValueError(f"unknown config fields {unknown}; the fields are those of DPConfig")
+    if "epochs" in overrides and "steps" not in overrides:
+        base["steps"] = None  # training length given in epochs replaces the preset's step count
+    if "steps" in overrides and "epochs" not in overrides:
+        base["epochs"] = None
+    return DPConfig(variant=variant, **{**base, **overrides})
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """``key=value`` from the command line, the value typed like the field's default
+    (tuples as comma lists, ``none`` for None)."""
+    if "=" not in text:
+        raise ValueError(f"override {text!r} is not key=value")
+    key, raw = text.split("=", 1)
+    fields = {f.name: f for f in dataclasses.fields(DPConfig)}
+    if key not in fields:
+        raise ValueError(f"override {text!r}: no config field {key!r}; fields: {sorted(fields)}")
+    default = getattr(DPConfig(), key)
+    if raw.lower() == "none":
+        return key, None
+    try:
+        if isinstance(default, tuple):
+            kind = type(default[0]) if default else int
+            return key, tuple(kind(v) for v in raw.split(",") if v)
+        if isinstance(default, bool):
+            return key, raw.lower() in ("1", "true", "yes")
+        if key in ("epochs",):
+            return key, float(raw)
+        if key in ("steps", "demos_per_task"):
+            return key, int(raw)
+        return key, type(default)(raw) if default is not None else raw
+    except ValueError as e:
+        raise ValueError(f"override {text!r}: {e}") from e

@@ -1,0 +1,166 @@
+"""Training windows from rendered expert demonstrations.
+
+Reads each task's trajectory file (actions, binary actions) and its ``rgb+tactile`` rendering
+(:class:`~mani_skill_softvt.data.demo_set.DemoSet` finds both), turns every frame into the
+policy's inputs (:mod:`.features`) and keeps them in memory as arrays. Only policy observations
+are read, never the ``evaluator/`` group or the env states.
+
+A sample is the step ``t`` of an episode: the observations of steps ``t-1, t`` (the first step
+repeats itself) and the actions ``t .. t+15`` (past the end, the last action repeats: the
+expert holds still). The variant picks the gripper column: continuous closure or binary.
+
+Preparing the arrays reads and resizes every image once (minutes for a few hundred demos); the
+result is cached beside the run (``data_cache.npz``, written atomically, keyed by the sources'
+sizes and modification times and the config's input fields), so a resumed run skips it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ..data.demo_set import DemoSet
+from ..data.trajectory import open_h5
+from ..fileio import atomic_write
+from .config import DPConfig
+from .features import frame_features
+
+OBS_MODE = "rgb+tactile"
+# Config fields that change the prepared arrays (anything else, e.g. the optimiser, does not).
+INPUT_FIELDS = ("variant", "camera_size", "tactile_size", "tactile_inputs", "depth_scale_um", "suite", "tasks",
+                "demos_per_task")
+
+
+@dataclass
+class DemoWindows:
+    """Per-frame arrays of all episodes, concatenated; ``starts[i]`` .. ``starts[i+1]`` is episode i."""
+
+    frames: dict[str, np.ndarray]  # per observation frame (T_i + 1 per episode)
+    actions: np.ndarray  # (sum T_i, 7) float32, the variant's gripper column
+    obs_starts: np.ndarray  # (E + 1,) offsets into frames
+    act_starts: np.ndarray  # (E + 1,) offsets into actions
+    cfg: DPConfig
+
+    def __len__(self) -> int:
+        return int(self.act_starts[-1])
+
+    @property
+    def episodes(self) -> int:
+        return len(self.act_starts) - 1
+
+    def stats(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """Min and max per column of the low-dimensional inputs and the actions (normalisers)."""
+        out = {"action": self.actions, "state": self.frames["state"]}
+        if "markers" in self.frames:
+            out["markers"] = self.frames["markers"].reshape(len(self.frames["markers"]), -1)
+        return {k: (torch.from_numpy(v.min(0)).float(), torch.from_numpy(v.max(0)).float()) for k, v in out.items()}
+
+    def sample_index(self, i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global step indices -> (episode, step within the episode)."""
+        ep = np.searchsorted(self.act_starts, i, side="right") - 1
+        return ep, i - self.act_starts[ep]
+
+    def batch(self, indices: np.ndarray) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """Observation windows (B, obs_horizon, ...) and action chunks (B, action_horizon, 7)."""
+        cfg = self.cfg
+        ep, t = self.sample_index(np.asarray(indices))
+        lengths = self.act_starts[ep + 1] - self.act_starts[ep]
+        obs_t = t[:, None] + np.arange(-cfg.obs_horizon + 1, 1)[None]
+        obs_rows = self.obs_starts[ep][:, None] + np.clip(obs_t, 0, None)
+        act_t = np.minimum(t[:, None] + np.arange(cfg.action_horizon)[None], lengths[:, None] - 1)
+        act_rows = self.act_starts[ep][:, None] + act_t
+        obs = {k: torch.from_numpy(v[obs_rows]) for k, v in self.frames.items()}
+        return obs, torch.from_numpy(self.actions[act_rows])
+
+
+def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
+    demo_set = DemoSet(demos_root, cfg.suite)
+    out = []
+    for task in cfg.tasks:
+        traj, rendered = demo_set.trajectory(task), demo_set.rendered(task, OBS_MODE)
+        if not traj.exists():
+            raise FileNotFoundError(f"{traj} does not exist; run `python -m mani_skill_softvt.demos generate --suite "
+                                    f"{cfg.suite} --tasks {task} --out {demos_root}` first (or train on other --set tasks=)")
+        if not rendered.exists():
+            raise FileNotFoundError(f"{rendered} does not exist; run `python -m mani_skill_softvt.demos render --suite "
+                                    f"{cfg.suite} --tasks {task} --obs-mode {OBS_MODE} --out {demos_root}` first")
+        out.append((task, traj, rendered))
+    return out
+
+
+def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]]) -> str:
+    files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for _, a, b in sources for p in (a, b)]
+    fields = {k: getattr(cfg, k) for k in INPUT_FIELDS}
+    return hashlib.sha256(json.dumps([files, fields], default=list).encode()).hexdigest()[:16]
+
+
+def _episode_names(f) -> list[str]:
+    return sorted((k for k in f.keys() if k.startswith("traj_")), key=lambda k: int(k.split("_")[1]))
+
+
+def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
+    """Read the demonstrations into :class:`DemoWindows` (see the module docstring)."""
+    frames: dict[str, list[np.ndarray]] = {}
+    actions, obs_starts, act_starts = [], [0], [0]
+    column = "actions_binary" if cfg.binary_gripper else "actions"
+    sources = _sources(cfg, demos_root)
+    with tqdm(total=len(sources), desc="prepare demos", unit="task") as bar:
+        for task, traj, rendered in sources:
+            with open_h5(traj) as ft, open_h5(rendered) as fr:
+                names = _episode_names(ft)[:cfg.demos_per_task]
+                for name in names:
+                    if name not in fr or "obs" not in fr[name]:
+                        raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
+                    a = ft[name][column][()].astype(np.float32)
+                    obs = fr[name]["obs"]
+                    n = obs["extra/tcp_pose"].shape[0]
+                    if n != len(a) + 1:
+                        raise ValueError(f"{rendered}:{name}: {n} frames for {len(a)} actions (expected one more); "
+                                         f"the rendering is stale: re-render task {task}")
+                    keys = [k for k in _needed_keys(cfg) if k in obs]
+                    data = {k: obs[k][()] for k in keys}
+                    for i in range(n):
+                        for k, v in frame_features({k: data[k][i] for k in keys}, cfg).items():
+                            frames.setdefault(k, []).append(v)
+                    actions.append(a)
+                    obs_starts.append(obs_starts[-1] + n)
+                    act_starts.append(act_starts[-1] + len(a))
+            bar.update()
+    if not actions:
+        raise ValueError(f"no demonstrations found for tasks {cfg.tasks} of {cfg.suite} under {demos_root}")
+    return DemoWindows({k: np.stack(v) for k, v in frames.items()}, np.concatenate(actions),
+                       np.asarray(obs_starts), np.asarray(act_starts), cfg)
+
+
+def _needed_keys(cfg: DPConfig) -> list[str]:
+    keys = ["extra/tcp_pose", "extra/gripper_width", "sensor_data/base_camera/rgb", "sensor_data/hand_camera/rgb"]
+    if cfg.tactile:
+        keys += [f"tactile/{s}/{k}" for s in ("left", "right") for k in ("rgb", "depth", "marker_initial", "marker_current")]
+    return keys
+
+
+def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWindows:
+    """:func:`prepare`, through the cache file ``cache`` when given (rebuilt if its key differs)."""
+    key = cache_key(cfg, _sources(cfg, demos_root))
+    if cache is not None and cache.exists():
+        with np.load(cache, allow_pickle=False) as z:
+            if str(z["key"]) == key:
+                frames = {k[len("frame/"):]: z[k] for k in z.files if k.startswith("frame/")}
+                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg)
+    windows = prepare(cfg, demos_root)
+    if cache is not None:
+        arrays = {f"frame/{k}": v for k, v in windows.frames.items()}
+
+        def save(tmp: Path):
+            with tmp.open("wb") as fh:
+                np.savez(fh, key=key, actions=windows.actions, obs_starts=windows.obs_starts,
+                         act_starts=windows.act_starts, **arrays)
+
+        atomic_write(cache, save)
+    return windows

@@ -1,0 +1,104 @@
+"""What a Diffusion Policy baseline sees of one control step, as pure functions.
+
+The same functions turn a rendered demonstration frame (training) and a live env observation
+(evaluation) into the policy's inputs, so the two cannot drift apart:
+
+- ``state``: the 7-D robot state of the paper, base-frame TCP position, TCP axis-angle and the
+  gripper width. The axis-angle is taken on the branch nearest the top-down hand, (pi, 0, 0):
+  the two representations of a near-half-turn differ by 2 pi in length, and a policy regressing
+  across that jump would learn nonsense.
+- ``base`` / ``hand``: the third-person and wrist RGB images, resized (area averaging).
+- ``tactile_<side>``: the finger's GelSight image, with its depth map as a fourth channel when the
+  config asks for it (``tactile_inputs``), resized.
+- ``markers``: each finger's marker displacement from rest, (2, 99, 2) px; two frames of it are the
+  paper's 792-D marker motion.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..physics.transforms import down_rotvec, quat_to_rotvec
+from ..tasks import constants as C
+from .config import DPConfig
+
+FINGERS = ("left", "right")
+CAMERAS = {"base": "base_camera", "hand": "hand_camera"}
+DOWN_ROTVEC = down_rotvec(0.0)
+
+
+def robot_state(tcp_pose_world: np.ndarray, gripper_width: float) -> np.ndarray:
+    """The paper's 7-D robot state: base-frame TCP xyz, axis-angle (top-down branch), gripper width (m)."""
+    pose = np.asarray(tcp_pose_world, np.float64).reshape(7)
+    rotvec = quat_to_rotvec(pose[3:7], reference=DOWN_ROTVEC)
+    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], rotvec, [float(gripper_width)]]).astype(np.float32)
+
+
+def resize_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` (H, W[, C]) resized to ``size`` = (height, width) by area averaging (dtype kept)."""
+    h, w = size
+    if image.shape[:2] == (h, w):
+        return np.ascontiguousarray(image)
+    if image.dtype == np.uint8:
+        return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
+    out = cv2.resize(image.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+    return np.rint(out).astype(image.dtype) if image.dtype.kind in "iu" else out.astype(image.dtype)
+
+
+def tactile_image(rgb: np.ndarray, depth_um: np.ndarray | None, cfg: DPConfig) -> np.ndarray:
+    """One finger's tactile stream, (h, w, 3 or 4) uint8: the image, and the depth map scaled so
+    that ``cfg.depth_scale_um`` is 255 (clipped) when ``cfg.tactile_inputs`` is "rgb+depth"."""
+    small = resize_image(rgb, cfg.tactile_size)
+    if cfg.tactile_inputs == "rgb":
+        return small
+    if depth_um is None:
+        raise ValueError("tactile_inputs 'rgb+depth' needs the tactile depth map; render observations "
+                         "with obs_mode rgb+tactile from this version of the package")
+    d = resize_image(np.asarray(depth_um, np.float32), cfg.tactile_size)
+    d8 = np.clip(np.rint(d * (255.0 / cfg.depth_scale_um)), 0, 255).astype(np.uint8)
+    return np.concatenate([small, d8[..., None]], axis=-1)
+
+
+def marker_displacement(marker_initial: np.ndarray, marker_current: np.ndarray) -> np.ndarray:
+    """Marker motion of one finger and frame: current minus rest position, (99, 2) px float32."""
+    return (np.asarray(marker_current, np.float32) - np.asarray(marker_initial, np.float32)).reshape(-1, 2)
+
+
+def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
+    """The policy inputs of one step from a flat observation (rendered keys such as
+    ``extra/tcp_pose``, ``sensor_data/base_camera/rgb``, ``tactile/left/depth``; one frame each)."""
+    out = {"state": robot_state(flat["extra/tcp_pose"], float(np.asarray(flat["extra/gripper_width"]).reshape(-1)[0]))}
+    for name, cam in CAMERAS.items():
+        out[name] = resize_image(np.asarray(flat[f"sensor_data/{cam}/rgb"]), cfg.camera_size)
+    if cfg.tactile:
+        for side in FINGERS:
+            if f"tactile/{side}/rgb" not in flat:
+                raise ValueError(f"variant {cfg.variant} needs tactile observations: use obs_mode rgb+tactile")
+            depth = flat.get(f"tactile/{side}/depth")
+            out[f"tactile_{side}"] = tactile_image(np.asarray(flat[f"tactile/{side}/rgb"]), depth, cfg)
+        out["markers"] = np.stack([marker_displacement(flat[f"tactile/{side}/marker_initial"],
+                                                       flat[f"tactile/{side}/marker_current"]) for side in FINGERS])
+    return out
+
+
+def flatten_env_obs(obs: dict) -> dict[str, np.ndarray]:
+    """A live env observation (nested dicts of batched (1, ...) tensors) as flat single-frame arrays
+    under the rendered files' keys."""
+    flat: dict[str, np.ndarray] = {}
+
+    def walk(prefix: str, node):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                walk(f"{prefix}{k}/", v)
+        elif not isinstance(node, str):
+            x = node.detach().cpu().numpy() if hasattr(node, "detach") else np.asarray(node)
+            flat[prefix[:-1]] = x[0] if x.ndim and x.shape[0] == 1 else x
+
+    walk("", obs)
+    return flat
+
+
+def image_keys(cfg: DPConfig) -> list[str]:
+    """The image streams of the variant, each with its own encoder."""
+    return list(CAMERAS) + ([f"tactile_{s}" for s in FINGERS] if cfg.tactile else [])

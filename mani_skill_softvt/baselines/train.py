@@ -1,0 +1,232 @@
+"""Train a Diffusion Policy baseline on rendered expert demonstrations (resumable).
+
+    python -m mani_skill_softvt.baselines.train --variant vt-c                    # cpu preset, Object-Soft
+    python -m mani_skill_softvt.baselines.train --variant vo-c --config paper     # the appendix's recipe (GPU)
+    python -m mani_skill_softvt.baselines.train --variant vo-b --set steps=500 batch_size=16
+
+Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (README,
+Baselines). Writes under ``--out`` (default ``outputs/baselines/<suite>/<variant>-<config>``):
+
+- ``checkpoint.pt``: everything to resume (weights, EMA, optimiser, schedule, random state,
+  losses), rewritten atomically every ``checkpoint_every`` steps; re-running the same command
+  continues from it, and the result is bit for bit the one an uninterrupted run gives;
+- ``policy.pt``: the EMA weights and the config, what ``evaluate --policy <path>`` loads;
+- ``loss.png``: the training loss; ``data_cache.npz``: the prepared demonstrations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ..fileio import atomic_write
+from ..paths import DEMOS_DIR, REPO_DIR
+from .config import PRESETS, VARIANTS, DPConfig, make_config, parse_override
+from .dataset import DemoWindows, load_windows
+from .model import DiffusionPolicyModel, noise_scheduler
+
+CHECKPOINT, POLICY, CACHE = "checkpoint.pt", "policy.pt", "data_cache.npz"
+SHIFT_PAD = 4  # px of random shift augmentation (DrQ-style; Diffusion Policy random-crops similarly)
+
+
+def default_out(cfg: DPConfig) -> Path:
+    return REPO_DIR / "outputs" / "baselines" / cfg.suite / f"{cfg.variant}-{cfg.preset}"
+
+
+def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:
+    """Shift each sample's frames (B, T, H, W, C) by one random offset within +-``pad`` px, edges
+    replicated: the augmentation that keeps a small image encoder from memorising pixels."""
+    b, t, h, w, c = images.shape
+    x = images.permute(0, 1, 4, 2, 3).reshape(b, t * c, h, w).float()
+    x = torch.nn.functional.pad(x, (pad, pad, pad, pad), mode="replicate")
+    dy, dx = torch.randint(0, 2 * pad + 1, (2, b), generator=generator)
+    out = torch.stack([x[i, :, dy[i]:dy[i] + h, dx[i]:dx[i] + w] for i in range(b)])
+    return out.reshape(b, t, c, h, w).permute(0, 1, 3, 4, 2).to(images.dtype)
+
+
+def total_steps(cfg: DPConfig, samples: int) -> int:
+    if cfg.steps is not None:
+        return cfg.steps
+    return math.ceil(cfg.epochs * samples / cfg.batch_size)
+
+
+def batch_indices(cfg: DPConfig, samples: int, step: int) -> np.ndarray:
+    """The samples of optimiser step ``step``: a fresh permutation per epoch, seeded by (seed, epoch),
+    so that a resumed run draws the batches an uninterrupted one would."""
+    per_epoch = max(1, samples // cfg.batch_size)
+    epoch, k = divmod(step, per_epoch)
+    perm = np.random.default_rng([cfg.seed, epoch]).permutation(samples)
+    if samples < cfg.batch_size:
+        return perm
+    return perm[k * cfg.batch_size:(k + 1) * cfg.batch_size]
+
+
+def empty_stats(cfg: DPConfig) -> dict:
+    """Normaliser placeholders of the right shapes (a checkpoint's buffers overwrite them)."""
+    z = lambda n: (torch.zeros(n), torch.ones(n))  # noqa: E731
+    out = {"action": z(cfg.action_dim), "state": z(cfg.state_dim)}
+    if cfg.tactile:
+        out["markers"] = z(cfg.marker_motion_dim // cfg.obs_horizon)
+    return out
+
+
+class Training:
+    """Model, EMA, optimiser and schedule of one run, with save and load."""
+
+    def __init__(self, cfg: DPConfig, stats: dict, steps: int):
+        from diffusers.optimization import get_cosine_schedule_with_warmup
+        from diffusers.training_utils import EMAModel
+
+        torch.manual_seed(cfg.seed)  # weight initialisation
+        self.cfg, self.steps = cfg, steps
+        self.model = DiffusionPolicyModel(cfg, stats)
+        self.ema = EMAModel(self.model.parameters(), decay=cfg.ema_max_decay, use_ema_warmup=True, inv_gamma=1.0,
+                            power=cfg.ema_power)
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr, betas=cfg.betas,
+                                           weight_decay=cfg.weight_decay)
+        self.lr_schedule = get_cosine_schedule_with_warmup(self.optimizer, cfg.warmup_steps, steps)
+        self.noise = noise_scheduler(cfg)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.step = 0
+        self.losses: list[float] = []
+
+    def state(self) -> dict:
+        return {"config": self.cfg.to_dict(), "steps": self.steps, "step": self.step, "model": self.model.state_dict(),
+                "ema": self.ema.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "lr_schedule": self.lr_schedule.state_dict(), "generator": self.generator.get_state(),
+                "losses": self.losses}
+
+    def load(self, ckpt: dict) -> None:
+        self.model.load_state_dict(ckpt["model"])
+        self.ema.load_state_dict(ckpt["ema"])
+        self.optimizer.load_state_dict(ckpt["optimizer"])
+        self.lr_schedule.load_state_dict(ckpt["lr_schedule"])
+        self.generator.set_state(ckpt["generator"])
+        self.step, self.losses = int(ckpt["step"]), list(ckpt["losses"])
+
+    def train_step(self, windows: DemoWindows) -> float:
+        obs, actions = windows.batch(batch_indices(self.cfg, len(windows), self.step))
+        for k in self.model.image_keys:
+            obs[k] = random_shift(obs[k], SHIFT_PAD, self.generator)
+        self.model.train()
+        loss = self.model.loss(obs, actions, self.generator, self.noise)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.lr_schedule.step()
+        self.ema.step(self.model.parameters())
+        self.step += 1
+        self.losses.append(float(loss.detach()))
+        return self.losses[-1]
+
+    def policy_state(self) -> dict:
+        """The EMA weights as a model state dict (what evaluation loads)."""
+        model = DiffusionPolicyModel(self.cfg, empty_stats(self.cfg))
+        model.load_state_dict(self.model.state_dict())
+        self.ema.copy_to(model.parameters())
+        return model.state_dict()
+
+
+def save(path: Path, obj: dict) -> None:
+    def write(tmp: Path):
+        with tmp.open("wb") as fh:
+            torch.save(obj, fh)
+
+    atomic_write(path, write)
+
+
+def load_checkpoint(path: Path) -> dict:
+    try:
+        return torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a damaged file
+        raise ValueError(f"{path} cannot be read ({type(e).__name__}: {e}); it is damaged: delete it to "
+                         "start over, or train into another --out") from None
+
+
+def check_same_run(ckpt: dict, cfg: DPConfig, path: Path) -> None:
+    if ckpt.get("config") != cfg.to_dict():
+        diff = sorted(k for k in cfg.to_dict() if ckpt.get("config", {}).get(k) != cfg.to_dict()[k])
+        raise ValueError(f"{path} is a run with another configuration (differs in {diff}); train into another "
+                         "--out, or repeat that run's --config/--set to resume it")
+
+
+def plot_losses(losses: list[float], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    steps = np.arange(1, len(losses) + 1)
+    ax.semilogy(steps, losses, lw=0.5, alpha=0.4, label="batch")
+    if len(losses) >= 50:
+        k = 50
+        ax.semilogy(steps[k - 1:], np.convolve(losses, np.ones(k) / k, mode="valid"), lw=1.5, label=f"mean of {k}")
+    ax.set_xlabel("optimiser step")
+    ax.set_ylabel("noise-prediction MSE")
+    ax.set_title(title)
+    ax.legend()
+    fig.tight_layout()
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
+    plt.close(fig)
+
+
+def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = None, progress: bool = True) -> Path:
+    """Train (or resume) the run in ``out``; returns the path of ``policy.pt``. ``stop_after``
+    ends this call after that many optimiser steps (the run resumes later)."""
+    if cfg.threads > 0:
+        torch.set_num_threads(cfg.threads)
+    out = Path(out)
+    ckpt_path = out / CHECKPOINT
+    ckpt = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
+    if ckpt is not None:
+        check_same_run(ckpt, cfg, ckpt_path)
+    windows = load_windows(cfg, demos_root, out / CACHE)
+    steps = total_steps(cfg, len(windows))
+    run = Training(cfg, windows.stats(), steps)
+    if ckpt is not None:
+        run.load(ckpt)
+    end = steps if stop_after is None else min(steps, run.step + stop_after)
+    t0 = time.perf_counter()
+    with tqdm(total=steps, initial=run.step, desc=f"train {cfg.variant}", unit="step", disable=not progress) as bar:
+        while run.step < end:
+            loss = run.train_step(windows)
+            bar.update()
+            bar.set_postfix(loss=f"{loss:.4f}")
+            if run.step % cfg.checkpoint_every == 0 or run.step == end:
+                save(ckpt_path, run.state())
+    policy_path = out / POLICY
+    if run.step == steps:
+        save(policy_path, {"config": cfg.to_dict(), "model": run.policy_state(), "steps": steps,
+                           "episodes": windows.episodes, "samples": len(windows),
+                           "train_wall_s_last_call": time.perf_counter() - t0})
+        plot_losses(run.losses, out / "loss.png", f"{cfg.variant} ({cfg.preset}), {windows.episodes} demos")
+    return policy_path
+
+
+def main(argv=None) -> Path:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--variant", required=True, choices=VARIANTS)
+    ap.add_argument("--config", default="cpu", choices=PRESETS, help="the appendix's recipe (paper) or the 2-core one")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields (DPConfig)")
+    ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    try:
+        cfg = make_config(args.variant, args.config, **dict(parse_override(s) for s in args.set))
+    except ValueError as e:
+        ap.error(str(e))
+    out = args.out or default_out(cfg)
+    path = train(cfg, args.demos, out)
+    print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
+    return path
+
+
+if __name__ == "__main__":
+    main()

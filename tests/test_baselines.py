@@ -1,0 +1,263 @@
+"""Diffusion Policy baselines: inputs, windows, training (determinism, resume), the evaluation agent.
+
+Synthetic demonstration files in the package's on-disk layout keep these fast; the networks are
+shrunk with config overrides. The real training and evaluation runs are in README, Baselines.
+"""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from mani_skill_softvt.baselines import train as T
+from mani_skill_softvt.baselines.agent import DiffusionPolicyAgent, load_policy_file
+from mani_skill_softvt.baselines.config import make_config, parse_override
+from mani_skill_softvt.baselines.dataset import load_windows
+from mani_skill_softvt.baselines.features import robot_state, tactile_image
+from mani_skill_softvt.data.demo_set import DemoSet
+from mani_skill_softvt.evaluation.policies import load_policy
+from mani_skill_softvt.physics.transforms import down_quat, down_rotvec
+from mani_skill_softvt.tasks import constants as C
+
+TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), encoder_blocks=(1, 1),
+            image_feature_dim=8, unet_dims=(8, 16), timestep_embed_dim=8, unet_groups=4, batch_size=4, steps=6,
+            checkpoint_every=2, warmup_steps=2, tasks=(0,), threads=1, train_timesteps=20, inference_timesteps=4)
+
+
+def _write_demos(root, lengths=(9, 6), seed=0):
+    """Task 0 of object_soft: a trajectory file and its rgb+tactile rendering (random images, an
+    action that moves with the state so that there is something to learn)."""
+    rng = np.random.default_rng(seed)
+    ds = DemoSet(root, "object_soft")
+    ds.dir.mkdir(parents=True)
+    with h5py.File(ds.trajectory(0), "w") as ft, h5py.File(ds.rendered(0, "rgb+tactile"), "w") as fr:
+        for e, t in enumerate(lengths):
+            a = np.zeros((t, 7), np.float32)
+            a[:, 0] = np.linspace(0.5, 0.6, t)
+            a[:, 3:6] = down_rotvec(0.1)
+            a[:, 6] = np.linspace(0, 0.8, t)
+            g = ft.create_group(f"traj_{e}")
+            g["actions"], g["actions_binary"] = a, np.where(np.arange(7) == 6, (a > 0.4), a).astype(np.float32)
+            o = fr.create_group(f"traj_{e}/obs")
+            pose = np.tile(np.r_[0.0, 0.0, 0.2, down_quat(0.1)], (t + 1, 1)).astype(np.float32)
+            pose[:, 0] = np.r_[a[:, 0], a[-1, 0]] + C.ROBOT_BASE_POSE[0]
+            o["extra/tcp_pose"], o["extra/gripper_width"] = pose, np.full((t + 1, 1), 0.08, np.float32)
+            for cam in ("base_camera", "hand_camera"):
+                o[f"sensor_data/{cam}/rgb"] = rng.integers(0, 256, (t + 1, 224, 224, 3), dtype=np.uint8)
+            for s in ("left", "right"):
+                o[f"tactile/{s}/rgb"] = rng.integers(0, 256, (t + 1, 240, 320, 3), dtype=np.uint8)
+                o[f"tactile/{s}/depth"] = rng.integers(0, 100, (t + 1, 240, 320), dtype=np.int16)
+                o[f"tactile/{s}/marker_initial"] = np.zeros((t + 1, 99, 2), np.float32)
+                o[f"tactile/{s}/marker_current"] = rng.normal(size=(t + 1, 99, 2)).astype(np.float32)
+    return ds
+
+
+# ------------------------------------------------------------------------------------ inputs
+
+def test_robot_state_is_continuous_through_the_half_turn():
+    # The top-down hand is a half turn: quat_to_rotvec's two branches differ by 2 pi in length.
+    # The state must take the branch of the actions (down_rotvec) for yaw on both sides of 0,
+    # and the sign of the quaternion must not matter.
+    for yaw in (-0.3, -1e-4, 0.0, 1e-4, 0.3):
+        for sign in (1.0, -1.0):
+            s = robot_state(np.r_[0.1, 0.2, 0.3, sign * down_quat(yaw)], 0.05)
+            np.testing.assert_allclose(s[3:6], down_rotvec(yaw), atol=1e-6)
+            np.testing.assert_allclose(s[:3], np.r_[0.1, 0.2, 0.3] - C.ROBOT_BASE_POSE[:3], atol=1e-7)
+            assert s[6] == np.float32(0.05)
+
+
+def test_tactile_stream_scales_depth_to_the_configured_range():
+    cfg = make_config("vt-c", tactile_size=(60, 80))
+    rgb = np.full((240, 320, 3), 100, np.uint8)
+    depth = np.zeros((240, 320), np.int16)
+    depth[:120] = 100  # 100 um over the top half: half of depth_scale_um = 200 um
+    img = tactile_image(rgb, depth, cfg)
+    assert img.shape == (60, 80, 4) and img.dtype == np.uint8
+    assert (img[..., :3] == 100).all()
+    np.testing.assert_array_equal(img[:30, :, 3], 128)  # round(100 * 255 / 200)
+    np.testing.assert_array_equal(img[30:, :, 3], 0)
+    with pytest.raises(ValueError, match="depth"):
+        tactile_image(rgb, None, cfg)
+    assert tactile_image(rgb, None, make_config("vt-c", tactile_inputs="rgb")).shape[-1] == 3
+
+
+def test_config_presets_and_overrides():
+    paper = make_config("vt-b", "paper")
+    assert (paper.lr, paper.betas, paper.weight_decay, paper.warmup_steps) == (1e-4, (0.95, 0.999), 1e-6, 100)
+    assert (paper.train_timesteps, paper.inference_timesteps, paper.inference_scheduler) == (100, 100, "ddpm")
+    assert (paper.action_horizon, paper.action_steps, paper.obs_horizon, paper.epochs) == (16, 8, 2, 20.0)
+    assert paper.batch_size == 128 and make_config("vo-b", "paper").batch_size == 256
+    assert paper.binary_gripper and paper.tactile and paper.marker_motion_dim == 792
+    assert make_config("vo-c", steps=5).steps == 5
+    assert make_config("vo-c", "paper", steps=5).epochs is None
+    assert parse_override("camera_size=96,96") == ("camera_size", (96, 96))
+    assert parse_override("epochs=2") == ("epochs", 2.0)
+    with pytest.raises(ValueError, match="no config field"):
+        parse_override("learning_rate=1")
+    with pytest.raises(ValueError, match="variant"):
+        make_config("vt-x")
+
+
+def test_paper_preset_has_the_papers_parameter_count():
+    # Appendix, table of VO/VT variants: Diffusion Policy VO has 329.2M trainable parameters.
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
+
+    cfg = make_config("vo-c", "paper")
+    n = sum(p.numel() for p in DiffusionPolicyModel(cfg, T.empty_stats(cfg)).parameters())
+    assert abs(n / 329.2e6 - 1) < 0.01
+
+
+# ----------------------------------------------------------------------------------- windows
+
+def test_windows_pad_at_the_episode_edges_and_never_cross_them(tmp_path):
+    _write_demos(tmp_path)
+    cfg = make_config("vt-c", **TINY)
+    w = load_windows(cfg, tmp_path, None)
+    assert len(w) == 15 and w.episodes == 2 and w.frames["base"].shape == (17, 16, 16, 3)
+    assert w.frames["tactile_left"].shape == (17, 12, 16, 4) and w.frames["markers"].shape == (17, 2, 99, 2)
+    obs, act = w.batch(np.array([0, 8, 9]))
+    # Step 0 repeats its frame as the previous one; step 8 (the last of episode 0) sees 7 and 8.
+    assert torch.equal(obs["base"][0, 0], obs["base"][0, 1])
+    np.testing.assert_array_equal(obs["state"][1].numpy(), w.frames["state"][[7, 8]])
+    # Its action chunk holds the episode's last action; step 9 is episode 1's first step.
+    assert torch.equal(act[1], torch.from_numpy(np.repeat(w.actions[8:9], 16, 0)))
+    assert torch.equal(obs["state"][2, 0], torch.from_numpy(w.frames["state"][10]))
+    np.testing.assert_array_equal(act[2, :6].numpy(), w.actions[9:15])
+    # The binary variant reads the binary gripper column.
+    wb = load_windows(make_config("vo-b", **TINY), tmp_path, None)
+    assert set(np.unique(wb.actions[:, 6])) == {0.0, 1.0} and "markers" not in wb.frames
+
+
+def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path):
+    ds = _write_demos(tmp_path / "demos")
+    cfg = make_config("vo-c", **TINY)
+    cache = tmp_path / "cache.npz"
+    w1 = load_windows(cfg, tmp_path / "demos", cache)
+    mtime = cache.stat().st_mtime_ns
+    w2 = load_windows(cfg, tmp_path / "demos", cache)
+    assert cache.stat().st_mtime_ns == mtime and np.array_equal(w1.frames["base"], w2.frames["base"])
+    w3 = load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
+    assert w3.frames["base"].shape[1:3] == (8, 8)
+    with pytest.raises(FileNotFoundError, match="demos render"):
+        ds.rendered(0, "rgb+tactile").unlink()
+        load_windows(cfg, tmp_path / "demos", None)
+
+
+# ---------------------------------------------------------------------------------- training
+
+def test_batches_cover_each_epoch_once():
+    cfg = make_config("vo-c", batch_size=4)
+    seen = np.concatenate([T.batch_indices(cfg, 12, s) for s in range(3)])
+    assert sorted(seen) == list(range(12))
+    assert not np.array_equal(seen, np.concatenate([T.batch_indices(cfg, 12, s) for s in range(3, 6)]))
+
+
+def test_random_shift_moves_whole_frames_within_the_pad():
+    g = torch.Generator().manual_seed(0)
+    img = torch.zeros(3, 2, 20, 20, 1, dtype=torch.uint8)
+    img[:, :, 10, 10] = 255
+    out = random_shift(img, 4, g)
+    for b in range(3):
+        (y0, x0), (y1, x1) = [torch.nonzero(out[b, t, ..., 0]).squeeze(0).tolist() for t in range(2)]
+        assert (y0, x0) == (y1, x1) and abs(y0 - 10) <= 4 and abs(x0 - 10) <= 4  # same shift for both frames
+
+
+random_shift = T.random_shift
+
+
+def test_training_resumes_bit_for_bit(tmp_path):
+    _write_demos(tmp_path / "demos")
+    cfg = make_config("vt-c", **TINY)
+    straight = T.train(cfg, tmp_path / "demos", tmp_path / "a", progress=False)
+    T.train(cfg, tmp_path / "demos", tmp_path / "b", stop_after=3, progress=False)  # stops between checkpoints
+    assert not (tmp_path / "b" / T.POLICY).exists()
+    resumed = T.train(cfg, tmp_path / "demos", tmp_path / "b", progress=False)
+    a, b = torch.load(straight, weights_only=False), torch.load(resumed, weights_only=False)
+    assert a["model"].keys() == b["model"].keys()
+    assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+    ca = torch.load(tmp_path / "a" / T.CHECKPOINT, weights_only=False)
+    cb = torch.load(tmp_path / "b" / T.CHECKPOINT, weights_only=False)
+    assert ca["losses"] == cb["losses"] and len(ca["losses"]) == cfg.steps
+    assert (tmp_path / "a" / "loss.png").stat().st_size > 0
+    # Another configuration in the same directory is refused, naming the difference.
+    with pytest.raises(ValueError, match="batch_size"):
+        T.train(make_config("vt-c", **{**TINY, "batch_size": 2}), tmp_path / "demos", tmp_path / "a", progress=False)
+
+
+def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
+    # One demo whose chunk at a step is set by the state (x ramps with the step; the other columns
+    # are constant). Sampled from the same noise, the trained policy's chunk must be far closer to
+    # the demonstrated one than the untrained network's (in normalised units, where the action
+    # box is [-1, 1] and an untrained sampler lands anywhere in it).
+    _write_demos(tmp_path / "demos", lengths=(40,))
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
+
+    cfg = make_config("vo-c", **{**TINY, "steps": 400, "checkpoint_every": 400, "lr": 1e-3, "warmup_steps": 10,
+                                 "unet_dims": (64, 128), "unet_groups": 8, "batch_size": 8})
+    w = load_windows(cfg, tmp_path / "demos", None)
+    untrained = T.Training(cfg, w.stats(), cfg.steps).model.eval()
+    _, trained = load_policy_file(T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False))
+    obs, act = w.batch(np.array([20]))
+
+    def error(model):
+        chunk = model.sample(obs, torch.Generator().manual_seed(1), noise_scheduler(cfg, inference=True))
+        norm = trained.normalize["action"]
+        return float((norm(chunk) - norm(act)).abs().mean())
+
+    assert error(trained) < 0.4 * error(untrained), (error(trained), error(untrained))
+
+
+# ------------------------------------------------------------------------------------- agent
+
+def _env_obs(rng, tactile: bool) -> dict:
+    obs = {"agent": {"qpos": torch.zeros(1, 9)},
+           "extra": {"tcp_pose": torch.from_numpy(np.r_[0.0, 0.0, 0.2, down_quat(0.0)][None].astype(np.float32)),
+                     "gripper_width": torch.full((1, 1), 0.08)},
+           "sensor_data": {c: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 224, 224, 3), dtype=np.uint8))}
+                           for c in ("base_camera", "hand_camera")},
+           "instruction": "pick"}
+    if tactile:
+        obs["tactile"] = {s: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 240, 320, 3), dtype=np.uint8)),
+                              "depth": torch.zeros(1, 240, 320, dtype=torch.int16),
+                              "marker_initial": torch.zeros(1, 99, 2), "marker_current": torch.zeros(1, 99, 2)}
+                          for s in ("left", "right")}
+    return obs
+
+
+@pytest.mark.parametrize("variant", ["vt-b", "vo-c"])
+def test_agent_replans_every_action_steps_and_is_deterministic(tmp_path, variant):
+    _write_demos(tmp_path / "demos")
+    path = T.train(make_config(variant, **TINY), tmp_path / "demos", tmp_path / "run", progress=False)
+    policy = load_policy(str(path))
+    assert isinstance(policy, DiffusionPolicyAgent) and policy.name == f"diffusion_policy[{variant}]"
+    runs = []
+    for _ in range(2):
+        rng = np.random.default_rng(0)
+        policy.reset("pick", seed=5)
+        calls = []
+        orig = policy._plan
+        policy._plan = lambda: calls.append(1) or orig()
+        runs.append(np.concatenate([policy.act(_env_obs(rng, variant.startswith("vt"))) for _ in range(17)]))
+        policy._plan = orig
+        assert len(calls) == 3  # steps 0, 8 and 16
+    assert runs[0].shape == (17, 7) and np.array_equal(runs[0], runs[1])
+    g = runs[0][:, 6]
+    assert set(np.unique(g)) <= {0.0, 1.0} if variant.endswith("-b") else ((0 <= g) & (g <= 1)).all()
+    if variant.startswith("vt"):
+        with pytest.raises(ValueError, match="tactile"):
+            policy.reset("pick", seed=5)
+            policy.act(_env_obs(np.random.default_rng(0), tactile=False))
+
+
+def test_loading_a_policy_file_says_what_is_wrong(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.pt.*baselines.train"):
+        load_policy(str(tmp_path / "missing.pt"))
+    _write_demos(tmp_path / "demos")
+    T.train(make_config("vo-c", **TINY), tmp_path / "demos", tmp_path / "run", stop_after=2, progress=False)
+    with pytest.raises(ValueError, match="training state"):
+        load_policy(str(tmp_path / "run" / T.CHECKPOINT))
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="bad.pt cannot be read"):
+        load_policy(str(tmp_path / "bad.pt"))
