@@ -30,12 +30,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--policy", default="expert",
                     help="expert | expert_cartesian | hold | random | module:Class (imports and runs that code "
                          "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "
-                         "needs --obs-mode rgb or rgb+tactile)")
+                         "needs --obs-mode rgb or rgb+tactile) | PATH/policy.pt (a trained Diffusion Policy "
+                         "baseline, mani_skill_softvt.baselines.train)")
     ap.add_argument("--tasks", nargs="+", default=[str(t) for t in DEFAULT_TASKS], help="task ids, or 'all'")
     ap.add_argument("--episodes-per-task", type=int, default=1)
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
-    ap.add_argument("--obs-mode", default="state_dict")
-    ap.add_argument("--control-mode", default="pd_ee_pose", choices=["pd_ee_pose", "pd_ee_pose_binary"])
+    ap.add_argument("--obs-mode", default=None,
+                    help="default: state_dict, or what a trained baseline (policy.pt) was trained on")
+    ap.add_argument("--control-mode", default=None, choices=["pd_ee_pose", "pd_ee_pose_binary"],
+                    help="default: pd_ee_pose, or pd_ee_pose_binary for a binary-gripper baseline (vo-b, vt-b)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--ray", metavar="ADDRESS", default=None,
                     help="run the episodes on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
@@ -50,6 +53,7 @@ def main(argv=None) -> dict:
 
     if args.rescore is not None:
         return _rescore(args.rescore, args.percentile, args.out)
+    _resolve_modes(ap, args)
     tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
     if any(not 0 <= t < NUM_TASKS for t in tasks):
         ap.error(f"task ids must be in [0, {NUM_TASKS - 1}]")
@@ -70,7 +74,9 @@ def main(argv=None) -> dict:
     if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
         print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
     eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
-    policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", args.policy).strip("_")  # a file name, also for ws://host:port
+    # A file name, also for ws://host:port; a trained baseline is named by its run directory (vo-c-cpu).
+    tag_source = Path(args.policy).parent.name if args.policy.endswith(".pt") else args.policy
+    policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", tag_source).strip("_")
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
     records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
@@ -96,6 +102,24 @@ def main(argv=None) -> dict:
     if args.video:
         _videos(records[:args.video], args.policy, args.control_mode, args.out / "videos", stem)
     return {"records": records}
+
+
+def _resolve_modes(ap: argparse.ArgumentParser, args) -> None:
+    """Fill in the obs and control modes: a trained baseline's own, else state_dict and pd_ee_pose;
+    a mode that contradicts what the baseline was trained on is an error, not a silent mismatch."""
+    need_obs, need_control = "state_dict", "pd_ee_pose"
+    if args.policy.endswith(".pt"):
+        from .baselines.agent import required_modes
+
+        try:
+            need_obs, need_control = required_modes(Path(args.policy))
+        except (FileNotFoundError, ValueError) as e:
+            ap.error(str(e))
+        for flag, given, need in (("--obs-mode", args.obs_mode, need_obs), ("--control-mode", args.control_mode, need_control)):
+            if given is not None and given != need:
+                ap.error(f"{args.policy} was trained for {flag} {need}; evaluate it with {flag} {need} (or leave the flag out)")
+    args.obs_mode = args.obs_mode or need_obs
+    args.control_mode = args.control_mode or need_control
 
 
 def _rescore(path: Path, percentile: float | None, out: Path) -> dict:

@@ -261,3 +261,29 @@ def test_loading_a_policy_file_says_what_is_wrong(tmp_path):
     (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(ValueError, match="bad.pt cannot be read"):
         load_policy(str(tmp_path / "bad.pt"))
+
+
+def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):
+    from mani_skill_softvt import evaluate
+
+    _write_demos(tmp_path / "demos")
+    path = T.train(make_config("vt-b", **TINY), tmp_path / "demos", tmp_path / "vt-b-tiny", progress=False)
+    for flag, wrong, right in (("--obs-mode", "rgb", "rgb+tactile"), ("--control-mode", "pd_ee_pose", "pd_ee_pose_binary")):
+        with pytest.raises(SystemExit):
+            evaluate.main(["--policy", str(path), flag, wrong, "--out", str(tmp_path / "eval")])
+        assert f"{flag} {right}" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
+    # End to end on the real env: the record names the variant and the modes it was resolved to.
+    from mani_skill_softvt import evaluate
+    from mani_skill_softvt.evaluation.runner import read_records
+
+    _write_demos(tmp_path / "demos")
+    path = T.train(make_config("vt-c", **TINY), tmp_path / "demos", tmp_path / "vt-c-tiny", progress=False)
+    evaluate.main(["--policy", str(path), "--tasks", "3", "--out", str(tmp_path / "eval")])
+    (rec,) = read_records(tmp_path / "eval" / "object_soft_id_vt-c-tiny.jsonl")
+    assert rec["receipt"]["policy"] == "diffusion_policy[vt-c]" and not rec["receipt"]["privileged"]
+    assert (rec["obs_mode"], rec["control_mode"]) == ("rgb+tactile", "pd_ee_pose")
+    assert rec["termination"] in ("timeout", "dropped", "success") and rec["error"] is None

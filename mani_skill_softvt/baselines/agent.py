@@ -41,6 +41,13 @@ def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
     return cfg, model
 
 
+def required_modes(path: Path) -> tuple[str, str]:
+    """(obs mode, control mode) a ``policy.pt`` was trained for: rgb+tactile for VT variants, and
+    the binary gripper control mode for the -b variants."""
+    cfg, _ = load_policy_file(path)
+    return ("rgb+tactile" if cfg.tactile else "rgb"), ("pd_ee_pose_binary" if cfg.binary_gripper else "pd_ee_pose")
+
+
 class DiffusionPolicyAgent(Policy):
     """Closed-loop Diffusion Policy (see the module docstring)."""
 
@@ -48,7 +55,7 @@ class DiffusionPolicyAgent(Policy):
         self.path = Path(path)
         self.cfg, self.model = load_policy_file(self.path)
         self.name = f"diffusion_policy[{self.cfg.variant}]"
-        self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"
+        self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"  # what required_modes() says
         self.scheduler = noise_scheduler(self.cfg, inference=True)
         self.threads = threads
         self.history: deque = deque(maxlen=self.cfg.obs_horizon)
