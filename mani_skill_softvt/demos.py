@@ -197,6 +197,17 @@ def format_stats(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _image_size(text: str) -> tuple[int, int] | None:
+    """``HxW`` -> (H, W); ``native`` -> None (each stream keeps its size)."""
+    if text == "native":
+        return None
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--image-size {text!r}: give HxW (e.g. 224x224) or 'native'") from None
+    return h, w
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.demos", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -225,6 +236,9 @@ def main(argv=None):
     e.add_argument("--out", type=Path, default=DEMOS_DIR, help="demos directory (generate + render output)")
     e.add_argument("--lerobot-out", type=Path, required=True, help="new (empty) directory for the LeRobot dataset")
     e.add_argument("--obs-mode", default="rgb+tactile", help="which rendering to export (as passed to render)")
+    e.add_argument("--image-size", default="224x224", metavar="HxW",
+                   help="resize every image stream (cameras and tactile) to HxW, as LeRobot's Diffusion Policy "
+                        "needs one shape for all image inputs; 'native' keeps each stream's size (tactile 240x320)")
     e.add_argument("--no-video", action="store_true", help="omit the image features (no mp4), e.g. for a tiny sample")
     args = ap.parse_args(argv)
     if args.cmd == "generate":
@@ -262,7 +276,7 @@ def main(argv=None):
         tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
         try:
             info = export_lerobot(demo_set.lerobot_sources(tasks, args.obs_mode), args.lerobot_out,
-                                  use_videos=not args.no_video)
+                                  use_videos=not args.no_video, image_size=_image_size(args.image_size))
         except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
             ap.error(str(err))
         print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "

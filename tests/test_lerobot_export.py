@@ -190,6 +190,28 @@ def test_videos_decode_with_the_right_frames(exported):
             assert err < 6.0, (vk, i, err)
 
 
+def test_cli_export_gives_every_image_stream_one_shape(rendered, tmp_path):
+    # LeRobot's stock DiffusionPolicy refuses image inputs of different shapes (cameras 224x224,
+    # GelSight 240x320); the CLI's default resizes every stream to the cameras' size.
+    import cv2
+
+    out = tmp_path / "resized"
+    info = main(["export-lerobot", "--suite", "object_rigid", "--tasks", "3", "--out", str(rendered),
+                 "--lerobot-out", str(out)])
+    shapes = {k: tuple(f["shape"]) for k, f in info["features"].items() if f["dtype"] == "video"}
+    assert set(shapes.values()) == {(224, 224, 3)} and len(shapes) == 4
+    d = rendered / "object_rigid"
+    s = _source(Source(d / "task3.h5", d / "task3_rgb_tactile.h5"))
+    reader = imageio.get_reader(out / "videos/observation.images.tactile_left/chunk-000/file-000.mp4", format="FFMPEG")
+    first = reader.get_data(0)
+    reader.close()
+    ref = cv2.resize(s["obs"]["tactile/left/rgb"][0], (224, 224), interpolation=cv2.INTER_AREA)
+    assert np.abs(first.astype(float) - ref.astype(float)).mean() < 6.0  # lossy h264, as above
+    with pytest.raises(SystemExit):
+        main(["export-lerobot", "--suite", "object_rigid", "--tasks", "3", "--out", str(rendered),
+              "--lerobot-out", str(tmp_path / "bad"), "--image-size", "224"])
+
+
 def test_no_evaluator_quantity_is_exported(exported):
     out, info, _ = exported
     names = list(pq.read_schema(out / "data/chunk-000/file-000.parquet").names)

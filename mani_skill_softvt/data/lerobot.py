@@ -344,11 +344,15 @@ def _plan(sources: list[Source], use_videos: bool) -> list[dict]:
 
 
 def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True, fps: int = FPS,
-                   episodes_per_file: int = EPISODES_PER_FILE, robot_type: str = ROBOT_TYPE) -> dict:
+                   episodes_per_file: int = EPISODES_PER_FILE, robot_type: str = ROBOT_TYPE,
+                   image_size: tuple[int, int] | None = None) -> dict:
     """Write the LeRobot v3.0 dataset of ``sources`` under ``out_dir`` (which must be empty); return info.json.
 
     ``use_videos=False`` omits the image features entirely (no mp4, no video_path), e.g. for a
-    tiny sample. Every file is written atomically and ``meta/info.json`` last, so a directory
+    tiny sample. ``image_size`` = (height, width) resizes every image stream, cameras and tactile,
+    to one size (area averaging); LeRobot's stock Diffusion Policy needs all its image inputs the
+    same shape, and the GelSight's 240x320 is not the cameras' 224x224. None keeps each stream's
+    own size. Every file is written atomically and ``meta/info.json`` last, so a directory
     with an info.json is a complete dataset.
     """
     import pyarrow as pa
@@ -358,6 +362,8 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
         raise ValueError(f"{out_dir} is not empty; export into a new directory (or delete this one first)")
     if episodes_per_file < 1:
         raise ValueError("episodes_per_file must be >= 1")
+    if image_size is not None and (len(image_size) != 2 or min(image_size) < 8):
+        raise ValueError(f"image_size {image_size}: give (height, width), each at least 8 pixels")
     episodes = _plan(list(sources), use_videos)
     if not episodes:
         raise ValueError("nothing to export: no episodes in the given sources")
@@ -373,7 +379,7 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
         for ep in group:
             ep_index = len(ep_rows)
             cols, stats, features = _read_episode(ep, ep_index, task_index[ep["instruction"]], start, fps, features,
-                                                  use_videos)
+                                                  use_videos, image_size)
             tables.append(_arrow_table(cols, features))
             t = ep["length"]
             row = {"episode_index": ep_index, "tasks": [ep["instruction"]], "length": t,
@@ -386,7 +392,7 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
         _write_parquet(out_dir / _data_path("data", chunk, file), pa.concat_tables(tables))
         if use_videos:
             for vk, key in video_sources().items():
-                _write_episode_videos(out_dir, vk, key, group, ep_rows[-len(group):], chunk, file, fps)
+                _write_episode_videos(out_dir, vk, key, group, ep_rows[-len(group):], chunk, file, fps, image_size)
 
     _write_episodes_meta(out_dir, ep_rows, ep_stats)
     global_stats = {f: aggregate_stats([s[f] for s in ep_stats]) for f in ep_stats[0]}
@@ -411,7 +417,7 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
 
 
 def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int, features: dict | None,
-                  use_videos: bool) -> tuple[dict, dict, dict]:
+                  use_videos: bool, image_size: tuple[int, int] | None = None) -> tuple[dict, dict, dict]:
     """One episode's columns and stats; ``features`` are taken from the first episode, then enforced."""
     with open_h5(ep["source"].trajectory_h5) as src, open_h5(ep["source"].rendered_h5) as ren:
         obs, t = ren[ep["traj"]]["obs"], ep["length"]
@@ -420,8 +426,9 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
             features = numeric_features(cols, state_names({k: int(np.prod(obs[k].shape[1:])) for k, _ in STATE_PARTS}))
             if use_videos:
                 for vk, key in video_sources().items():
-                    features[vk] = video_feature(int(obs[key].shape[1]), int(obs[key].shape[2]), fps)
-        check_shapes(f"{ep['source'].rendered_h5}:{ep['traj']}", cols, obs, features, use_videos)
+                    h, w = image_size or (int(obs[key].shape[1]), int(obs[key].shape[2]))
+                    features[vk] = video_feature(h, w, fps)
+        check_shapes(f"{ep['source'].rendered_h5}:{ep['traj']}", cols, obs, features, use_videos and image_size is None)
         stats = {f: feature_stats(cols[f]) for f in features if features[f]["dtype"] != "video"}
         if use_videos:
             stats.update({vk: image_stats(obs[key], t) for vk, key in video_sources().items()})
@@ -429,14 +436,19 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
 
 
 def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: list[dict], rows: list[dict],
-                          chunk: int, file: int, fps: int) -> None:
+                          chunk: int, file: int, fps: int, image_size: tuple[int, int] | None = None) -> None:
     """One mp4 per (video key, file) with the group's episodes back to back; fills the rows' offsets."""
+    import cv2
+
     def frames():
         for ep in group:
             with open_h5(ep["source"].rendered_h5) as ren:
                 data = ren[ep["traj"]]["obs"][obs_key]
                 for i in range(ep["length"]):  # T frames, as in the data file
-                    yield data[i]
+                    f = data[i]
+                    if image_size is not None and f.shape[:2] != tuple(image_size):
+                        f = cv2.resize(f, (image_size[1], image_size[0]), interpolation=cv2.INTER_AREA)
+                    yield f
 
     n = encode_video(out_dir / _data_path("video", chunk, file, video_key), frames(), fps)
     if n != sum(ep["length"] for ep in group):
