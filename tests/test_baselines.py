@@ -6,6 +6,8 @@ shrunk with config overrides. The real training and evaluation runs are in READM
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -287,3 +289,25 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     assert rec["receipt"]["policy"] == "diffusion_policy[vt-c]" and not rec["receipt"]["privileged"]
     assert (rec["obs_mode"], rec["control_mode"]) == ("rgb+tactile", "pd_ee_pose")
     assert rec["termination"] in ("timeout", "dropped", "success") and rec["error"] is None
+
+
+def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
+    from mani_skill_softvt.baselines import report
+    from mani_skill_softvt.evaluation.runner import record_hash
+
+    def rec(variant, seed, success, r_max):
+        r = ({"suite": "object_soft", "task_id": 0, "condition": "id", "seed": seed, "success": success,
+                      "dsr_success": success and r_max <= 1, "r_max": r_max, "termination": "success" if success else "timeout",
+                      "receipt": {"policy": f"diffusion_policy[{variant}]"}, "policy": "x.pt", "tau_o": 0.01})
+        return {**r, "record_sha256": record_hash(r)}
+
+    path = tmp_path / "r.jsonl"
+    rows = [rec("vo-c", i, i < 4, 1.5 if i < 1 else 0.5) for i in range(10)] + [rec("vt-b", i, False, 0.1) for i in range(5)]
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    data = report.main([str(path), "--out", str(tmp_path)])
+    vo = data["object_soft/id/vo-c"]
+    assert (vo["episodes"], vo["tsr"], vo["dsr"], vo["gap_share_of_successes"]) == (10, 0.4, 0.3, 0.25)
+    assert vo["gap_share_ci95"][0] < 0.25 < vo["gap_share_ci95"][1] and vo["paper"][1:] == (37.4, 33.6)
+    assert data["object_soft/id/vt-b"]["gap_share_ci95"] is None
+    text = (tmp_path / "results.md").read_text()
+    assert "| object_soft | ID | vo-c | 10 | 40.0 [" in text and "no successes" in text
