@@ -197,6 +197,29 @@ def format_stats(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _render_task(suite: str, task_id: int, out: str, obs_mode: str, queue) -> tuple[int, int]:
+    """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`)."""
+    from .data.trajectory import render_observations
+
+    demo_set = DemoSet(Path(out), suite)
+    return task_id, render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode), suite,
+                                        task_id, obs_mode)
+
+
+def rendering_is_current(trajectory_h5: Path, rendered_h5: Path) -> bool:
+    """Whether ``rendered_h5`` holds observations of exactly the episodes of ``trajectory_h5`` and
+    was written after it (a re-run of render skips such a task: resume)."""
+    import h5py
+
+    if not rendered_h5.exists() or rendered_h5.stat().st_mtime_ns < trajectory_h5.stat().st_mtime_ns:
+        return False
+    try:
+        with h5py.File(trajectory_h5, "r") as a, h5py.File(rendered_h5, "r") as b:
+            return set(a.keys()) == set(b.keys()) and all("obs" in b[k] for k in b.keys())
+    except OSError:  # unreadable: render it again
+        return False
+
+
 def _image_size(text: str) -> tuple[int, int] | None:
     """``HxW`` -> (H, W); ``native`` -> None (each stream keeps its size)."""
     if text == "native":
@@ -226,6 +249,7 @@ def main(argv=None):
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
     r.add_argument("--obs-mode", default="rgb+tactile")
+    r.add_argument("--workers", type=int, default=1, help="tasks rendered in parallel processes")
     r.add_argument("--out", type=Path, default=DEMOS_DIR)
     s = sub.add_parser("stats", help="per-task statistics of generated demos")
     s.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
@@ -254,20 +278,31 @@ def main(argv=None):
     if args.cmd == "render":
         from tqdm import tqdm
 
-        from .data.trajectory import CorruptDataError, render_observations
+        from .data.trajectory import CorruptDataError
 
+        if args.workers < 1:
+            ap.error("--workers must be >= 1")
         demo_set = DemoSet(args.out, args.suite)
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
-        for t in tqdm(tasks, desc=f"render {args.obs_mode}", unit="task"):
+        todo = []
+        for t in tasks:
             src = demo_set.trajectory(t)
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
-                continue
-            try:
-                n = render_observations(src, demo_set.rendered(t, args.obs_mode), args.suite, t, args.obs_mode)
-            except CorruptDataError as err:
-                ap.error(str(err))
-            print(f"task {t}: rendered {n} episodes")
+            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode)):
+                print(f"task {t}: already rendered (delete {demo_set.rendered(t, args.obs_mode).name} to redo it)")
+            else:
+                todo.append((args.suite, t, str(args.out), args.obs_mode))
+        from .parallel import run_tasks
+
+        try:
+            with tqdm(total=len(todo), desc=f"render {args.obs_mode}", unit="task") as bar:
+                for kind, value in run_tasks(_render_task, todo, args.workers):
+                    if kind == "result":
+                        bar.write(f"task {value[0]}: rendered {value[1]} episodes")
+                        bar.update()
+        except CorruptDataError as err:
+            ap.error(str(err))
         return None
     if args.cmd == "export-lerobot":
         from .data.lerobot import export_lerobot

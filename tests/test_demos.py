@@ -133,3 +133,25 @@ def test_truncated_demo_files_are_named(dataset, tmp_path, capsys):
         with pytest.raises(SystemExit):
             main(argv)
         assert f"{trajectory} is not a readable HDF5 file" in capsys.readouterr().err
+
+
+def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
+    import os
+
+    import h5py
+
+    from mani_skill_softvt.demos import rendering_is_current
+
+    traj, rendered = tmp_path / "task0.h5", tmp_path / "task0_rgb_tactile.h5"
+    with h5py.File(traj, "w") as f:
+        f.create_group("traj_0"), f.create_group("traj_1")
+    assert not rendering_is_current(traj, rendered)
+    with h5py.File(rendered, "w") as f:
+        f.create_group("traj_0/obs")
+    assert not rendering_is_current(traj, rendered)  # an episode is missing
+    with h5py.File(rendered, "a") as f:
+        f.create_group("traj_1/obs")
+    assert rendering_is_current(traj, rendered)
+    t = rendered.stat().st_mtime_ns
+    os.utime(traj, ns=(t + 10**9, t + 10**9))  # the trajectory file was rewritten after the rendering
+    assert not rendering_is_current(traj, rendered)
