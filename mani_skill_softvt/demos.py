@@ -206,18 +206,24 @@ def _render_task(suite: str, task_id: int, out: str, obs_mode: str, queue) -> tu
                                         task_id, obs_mode)
 
 
-def rendering_is_current(trajectory_h5: Path, rendered_h5: Path) -> bool:
-    """Whether ``rendered_h5`` holds observations of exactly the episodes of ``trajectory_h5`` and
-    was written after it (a re-run of render skips such a task: resume)."""
+def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = ()) -> bool:
+    """Whether ``rendered_h5`` holds observations of exactly the episodes of ``trajectory_h5``, with
+    the ``needed`` observation keys (what this version renders), and was written after it (a re-run
+    of render skips such a task: resume)."""
     import h5py
 
     if not rendered_h5.exists() or rendered_h5.stat().st_mtime_ns < trajectory_h5.stat().st_mtime_ns:
         return False
     try:
         with h5py.File(trajectory_h5, "r") as a, h5py.File(rendered_h5, "r") as b:
-            return set(a.keys()) == set(b.keys()) and all("obs" in b[k] for k in b.keys())
+            return set(a.keys()) == set(b.keys()) and all("obs" in b[k] and all(n in b[k]["obs"] for n in needed)
+                                                          for k in b.keys())
     except OSError:  # unreadable: render it again
         return False
+
+
+# Observation keys a rendering must have to count as current (older renderings lack the depth map).
+CURRENT_RENDER_KEYS = {"rgb+tactile": ("tactile/left/depth", "tactile/right/depth")}
 
 
 def _image_size(text: str) -> tuple[int, int] | None:
@@ -289,7 +295,7 @@ def main(argv=None):
             src = demo_set.trajectory(t)
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
-            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode)):
+            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode), CURRENT_RENDER_KEYS.get(args.obs_mode, ())):
                 print(f"task {t}: already rendered (delete {demo_set.rendered(t, args.obs_mode).name} to redo it)")
             else:
                 todo.append((args.suite, t, str(args.out), args.obs_mode))

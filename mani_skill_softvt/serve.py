@@ -53,10 +53,12 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
            "instruction": instruction}
     if f"observation/tactile_{TACTILE_SIDES[0]}" in request:
         obs["tactile"] = {side: {"rgb": _batched(request[f"observation/tactile_{side}"], np.uint8),
-                                 "depth": _batched(request[f"observation/tactile_{side}_depth"], np.int16),
                                  **{env_key: _batched(request[f"observation/tactile_{side}_{name}"], np.float32)
                                     for name, env_key in TACTILE_MARKERS.items()}}
                           for side in TACTILE_SIDES}
+        for side in TACTILE_SIDES:  # a client of an older package sends no depth map
+            if f"observation/tactile_{side}_depth" in request:
+                obs["tactile"][side]["depth"] = _batched(request[f"observation/tactile_{side}_depth"], np.int16)
     return obs, instruction
 
 

@@ -46,6 +46,7 @@ def _write_demos(root, lengths=(9, 6), seed=0):
             pose = np.tile(np.r_[0.0, 0.0, 0.2, down_quat(0.1)], (t + 1, 1)).astype(np.float32)
             pose[:, 0] = np.r_[a[:, 0], a[-1, 0]] + C.ROBOT_BASE_POSE[0]
             o["extra/tcp_pose"], o["extra/gripper_width"] = pose, np.full((t + 1, 1), 0.08, np.float32)
+            o["agent/qpos"] = np.tile(np.r_[np.zeros(7), 0.04, 0.04], (t + 1, 1)).astype(np.float32)
             for cam in ("base_camera", "hand_camera"):
                 o[f"sensor_data/{cam}/rgb"] = rng.integers(0, 256, (t + 1, 224, 224, 3), dtype=np.uint8)
             for s in ("left", "right"):
@@ -183,9 +184,16 @@ def test_training_resumes_bit_for_bit(tmp_path):
     cb = torch.load(tmp_path / "b" / T.CHECKPOINT, weights_only=False)
     assert ca["losses"] == cb["losses"] and len(ca["losses"]) == cfg.steps
     assert (tmp_path / "a" / "loss.png").stat().st_size > 0
-    # Another configuration in the same directory is refused, naming the difference.
+    # Another configuration in the same directory is refused, naming the difference; so are
+    # demonstrations rendered again since (other normalisers, other batches).
     with pytest.raises(ValueError, match="batch_size"):
         T.train(make_config("vt-c", **{**TINY, "batch_size": 2}), tmp_path / "demos", tmp_path / "a", progress=False)
+    (tmp_path / "b" / T.POLICY).unlink()
+    ckpt = torch.load(tmp_path / "b" / T.CHECKPOINT, weights_only=False)
+    T.save(tmp_path / "b" / T.CHECKPOINT, {**ckpt, "step": 3})  # an unfinished run
+    _write_demos(tmp_path / "demos2", seed=1)
+    with pytest.raises(ValueError, match="other demonstration files"):
+        T.train(cfg, tmp_path / "demos2", tmp_path / "b", progress=False)
 
 
 def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
@@ -214,7 +222,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
 # ------------------------------------------------------------------------------------- agent
 
 def _env_obs(rng, tactile: bool) -> dict:
-    obs = {"agent": {"qpos": torch.zeros(1, 9)},
+    obs = {"agent": {"qpos": torch.tensor([[0.0] * 7 + [0.04, 0.04]])},
            "extra": {"tcp_pose": torch.from_numpy(np.r_[0.0, 0.0, 0.2, down_quat(0.0)][None].astype(np.float32)),
                      "gripper_width": torch.full((1, 1), 0.08)},
            "sensor_data": {c: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 224, 224, 3), dtype=np.uint8))}
@@ -233,16 +241,17 @@ def test_agent_replans_every_action_steps_and_is_deterministic(tmp_path, variant
     _write_demos(tmp_path / "demos")
     path = T.train(make_config(variant, **TINY), tmp_path / "demos", tmp_path / "run", progress=False)
     policy = load_policy(str(path))
-    assert isinstance(policy, DiffusionPolicyAgent) and policy.name == f"diffusion_policy[{variant}]"
+    tactile = variant.startswith("vt")
+    assert isinstance(policy, DiffusionPolicyAgent)
+    assert policy.name == f"diffusion_policy[{variant},cpu{',rgb+depth' if tactile else ''}]"
     runs = []
+    sample = policy.model.sample
     for _ in range(2):
         rng = np.random.default_rng(0)
         policy.reset("pick", seed=5)
         calls = []
-        orig = policy._plan
-        policy._plan = lambda: calls.append(1) or orig()
-        runs.append(np.concatenate([policy.act(_env_obs(rng, variant.startswith("vt"))) for _ in range(17)]))
-        policy._plan = orig
+        policy.model.sample = lambda *a: calls.append(1) or sample(*a)
+        runs.append(np.concatenate([policy.act(_env_obs(rng, tactile)) for _ in range(17)]))
         assert len(calls) == 3  # steps 0, 8 and 16
     assert runs[0].shape == (17, 7) and np.array_equal(runs[0], runs[1])
     g = runs[0][:, 6]

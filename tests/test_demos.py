@@ -152,6 +152,7 @@ def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
     with h5py.File(rendered, "a") as f:
         f.create_group("traj_1/obs")
     assert rendering_is_current(traj, rendered)
+    assert not rendering_is_current(traj, rendered, needed=("tactile/left/depth",))  # from an older version
     t = rendered.stat().st_mtime_ns
     os.utime(traj, ns=(t + 10**9, t + 10**9))  # the trajectory file was rewritten after the rendering
     assert not rendering_is_current(traj, rendered)

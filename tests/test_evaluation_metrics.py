@@ -28,6 +28,9 @@ def test_hand_built_records_give_hand_computed_rates_and_intervals():
     h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
     assert s["tsr_ci95"] == pytest.approx((c - h, c + h))
     assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == pytest.approx(1.0)
+    # The gap is 1 violating success of 5 episodes, its share 1 of 3 successes: their own intervals.
+    assert s["gap_ci95"] == wilson_interval(1, 5) and s["gap_share_ci95"] == wilson_interval(1, 3)
+    assert summarize([_rec(False, 0.3)])["gap_share_ci95"] is None  # no success to take a share of
 
 
 def test_dsr_never_exceeds_tsr():

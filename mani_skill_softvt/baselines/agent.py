@@ -3,7 +3,7 @@
 It sees every control step's observation (``act`` returns one action at a time, so the two
 observation frames it conditions on are consecutive steps, as in training) and replans every
 ``action_steps`` steps: it denoises a 16-step chunk and executes its first 8. Its record names the
-variant (``diffusion_policy[vt-c]``). The sampling noise is seeded by the episode seed, and torch
+variant and its recipe (``diffusion_policy[vt-c,cpu,rgb+depth]``). The sampling noise is seeded by the episode seed, and torch
 runs on one thread here, so an episode is the same bit for bit on a re-run.
 """
 
@@ -17,7 +17,8 @@ import torch
 
 from ..evaluation.policies import Policy
 from .config import DPConfig
-from .features import flatten_env_obs, frame_features
+from ..data.trajectory import flatten_batch
+from .features import frame_features
 from .model import DiffusionPolicyModel, noise_scheduler
 from .train import empty_stats, load_checkpoint
 
@@ -41,6 +42,13 @@ def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
     return cfg, model
 
 
+def policy_name(cfg: DPConfig) -> str:
+    """The name in evaluation records: variant, preset, and the tactile inputs of a VT variant
+    (``diffusion_policy[vt-c,cpu,rgb+depth]``), so that runs of different recipes never pool."""
+    parts = [cfg.variant, cfg.preset] + ([cfg.tactile_inputs] if cfg.tactile else [])
+    return f"diffusion_policy[{','.join(parts)}]"
+
+
 def required_modes(path: Path) -> tuple[str, str]:
     """(obs mode, control mode) a ``policy.pt`` was trained for: rgb+tactile for VT variants, and
     the binary gripper control mode for the -b variants."""
@@ -54,7 +62,7 @@ class DiffusionPolicyAgent(Policy):
     def __init__(self, path: str | Path, threads: int = 1):
         self.path = Path(path)
         self.cfg, self.model = load_policy_file(self.path)
-        self.name = f"diffusion_policy[{self.cfg.variant}]"
+        self.name = policy_name(self.cfg)
         self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"  # what required_modes() says
         self.scheduler = noise_scheduler(self.cfg, inference=True)
         self.threads = threads
@@ -69,7 +77,7 @@ class DiffusionPolicyAgent(Policy):
     def act(self, obs) -> np.ndarray:
         if not isinstance(obs, dict) or "sensor_data" not in obs:
             raise ValueError(f"{self.name} needs camera images: evaluate with --obs-mode {self.obs_mode}")
-        frame = frame_features(flatten_env_obs(obs), self.cfg)
+        frame = frame_features(flatten_batch(obs), self.cfg)
         if not self.history:  # the first step: its own previous frame, as in training
             self.history.extend([frame] * (self.cfg.obs_horizon - 1))
         self.history.append(frame)

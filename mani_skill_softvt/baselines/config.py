@@ -20,9 +20,19 @@ vo-b    as vo-c                                       binary
 vt-b    as vt-c                                       binary
 ======  ===========================================  =================
 
-One deliberate difference from the paper, on by default and named here: the tactile streams see
-the GelSight image *and* its depth map (``tactile_inputs="rgb+depth"``). On objects softer than
-the gel the RGB change is faint (README, tactile); ``tactile_inputs="rgb"`` gives the paper's input.
+Where this differs from the paper, and why:
+
+- The tactile streams see the GelSight image *and* its depth map (``tactile_inputs="rgb+depth"``,
+  the default). On objects softer than the gel the RGB change is faint (README, tactile);
+  ``tactile_inputs="rgb"`` gives the paper's input. The policy's name in a record says which.
+- The paper's binary variants (VO-B, VT-B) are ablations of pi0.5, not of Diffusion Policy; here
+  they are Diffusion Policy trained on the binary gripper column, as the benchmark's issue asks.
+- The marker-motion input is the 792 numbers concatenated to the state, with no adapter network:
+  the paper's VT Diffusion Policy has 455.7M trainable parameters against 433.2M here (VO: 329.2M
+  in the paper, 329.3M here).
+- Images are augmented by a random shift of ``shift_fraction`` of their size (edges replicated);
+  Diffusion Policy random-crops about 10 %.
+- ``paper`` is meant for a GPU (``device="cuda"``); it has not been run here.
 """
 
 from __future__ import annotations
@@ -57,6 +67,7 @@ class DPConfig:
     # -- networks
     encoder_widths: tuple[int, ...] = (16, 32, 64, 128)  # ResNet stage widths (ResNet-18: 64..512)
     encoder_blocks: tuple[int, ...] = (1, 1, 1, 1)  # basic blocks per stage (ResNet-18: 2, 2, 2, 2)
+    resnet_stem: bool = False  # ResNet-18's 7x7 stride-2 conv and max-pool; else one 3x3 stride-2 conv
     image_feature_dim: int = 64  # per image stream and frame
     unet_dims: tuple[int, ...] = (64, 128, 256)  # down-path channels of the 1-D U-Net
     unet_kernel: int = 5
@@ -74,11 +85,13 @@ class DPConfig:
     ema_power: float = 0.75  # EMA warm-up: decay = 1 - (1 + step)^-power, at most ema_max_decay (DP's values)
     ema_max_decay: float = 0.9999
     batch_size: int = 32
+    shift_fraction: float = 0.05  # random-shift augmentation, a fraction of the image's shorter side
     epochs: float | None = None  # training length in epochs (paper), or
     steps: int | None = 3000  # in optimiser steps (cpu); exactly one of the two is set
     checkpoint_every: int = 250  # optimiser steps between checkpoints (resume point)
     seed: int = 0
-    threads: int = 2  # torch intra-op threads while training (the machine's cores)
+    threads: int = 2  # torch intra-op threads while training (the machine's cores); 0: torch's default
+    device: str = "cpu"  # where training runs ("cuda" for the paper preset)
     # -- data
     suite: str = "object_soft"
     tasks: tuple[int, ...] = tuple(range(10))
@@ -125,9 +138,9 @@ class DPConfig:
 
 # The appendix's settings (a GPU run; documented, not run here).
 _PAPER = dict(preset="paper", camera_size=(224, 224), tactile_size=(240, 320), encoder_widths=(64, 128, 256, 512),
-              encoder_blocks=(2, 2, 2, 2), image_feature_dim=512, unet_dims=(512, 1024, 2048), timestep_embed_dim=128,
+              encoder_blocks=(2, 2, 2, 2), resnet_stem=True, image_feature_dim=512, unet_dims=(512, 1024, 2048), timestep_embed_dim=128,
               train_timesteps=100, inference_timesteps=100, inference_scheduler="ddpm", batch_size=256, epochs=20.0,
-              steps=None, checkpoint_every=1000, threads=0, demos_per_task=100)
+              steps=None, checkpoint_every=1000, threads=0, device="cuda", demos_per_task=100)
 _CPU: dict = dict(preset="cpu")
 
 

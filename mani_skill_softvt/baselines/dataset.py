@@ -46,6 +46,7 @@ class DemoWindows:
     obs_starts: np.ndarray  # (E + 1,) offsets into frames
     act_starts: np.ndarray  # (E + 1,) offsets into actions
     cfg: DPConfig
+    key: str = ""  # cache_key of the sources it was read from (a resumed run checks it)
 
     def __len__(self) -> int:
         return int(self.act_starts[-1])
@@ -126,7 +127,13 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
                     keys = [k for k in _needed_keys(cfg) if k in obs]
                     data = {k: obs[k][()] for k in keys}
                     for i in range(n):
-                        for k, v in frame_features({k: data[k][i] for k in keys}, cfg).items():
+                        try:
+                            features = frame_features({k: data[k][i] for k in keys}, cfg)
+                        except (KeyError, ValueError) as e:
+                            raise ValueError(f"{rendered}:{name}: {e}; re-render task {task} with "
+                                             f"`python -m mani_skill_softvt.demos render --suite {cfg.suite} --tasks "
+                                             f"{task} --obs-mode {OBS_MODE}` (delete the file first)") from None
+                        for k, v in features.items():
                             frames.setdefault(k, []).append(v)
                     actions.append(a)
                     obs_starts.append(obs_starts[-1] + n)
@@ -139,7 +146,7 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
 
 
 def _needed_keys(cfg: DPConfig) -> list[str]:
-    keys = ["extra/tcp_pose", "extra/gripper_width", "sensor_data/base_camera/rgb", "sensor_data/hand_camera/rgb"]
+    keys = ["agent/qpos", "extra/tcp_pose", "sensor_data/base_camera/rgb", "sensor_data/hand_camera/rgb"]
     if cfg.tactile:
         keys += [f"tactile/{s}/{k}" for s in ("left", "right") for k in ("rgb", "depth", "marker_initial", "marker_current")]
     return keys
@@ -152,8 +159,9 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWin
         with np.load(cache, allow_pickle=False) as z:
             if str(z["key"]) == key:
                 frames = {k[len("frame/"):]: z[k] for k in z.files if k.startswith("frame/")}
-                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg)
+                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg, key)
     windows = prepare(cfg, demos_root)
+    windows.key = key
     if cache is not None:
         arrays = {f"frame/{k}": v for k, v in windows.frames.items()}
 

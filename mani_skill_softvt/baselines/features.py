@@ -19,8 +19,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..physics.transforms import down_rotvec, quat_to_rotvec
-from ..tasks import constants as C
+from ..data.images import resize_image
+from ..physics.transforms import down_rotvec
+from ..tasks.robot import base_frame_pose
 from .config import DPConfig
 
 FINGERS = ("left", "right")
@@ -30,20 +31,8 @@ DOWN_ROTVEC = down_rotvec(0.0)
 
 def robot_state(tcp_pose_world: np.ndarray, gripper_width: float) -> np.ndarray:
     """The paper's 7-D robot state: base-frame TCP xyz, axis-angle (top-down branch), gripper width (m)."""
-    pose = np.asarray(tcp_pose_world, np.float64).reshape(7)
-    rotvec = quat_to_rotvec(pose[3:7], reference=DOWN_ROTVEC)
-    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], rotvec, [float(gripper_width)]]).astype(np.float32)
-
-
-def resize_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``image`` (H, W[, C]) resized to ``size`` = (height, width) by area averaging (dtype kept)."""
-    h, w = size
-    if image.shape[:2] == (h, w):
-        return np.ascontiguousarray(image)
-    if image.dtype == np.uint8:
-        return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
-    out = cv2.resize(image.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
-    return np.rint(out).astype(image.dtype) if image.dtype.kind in "iu" else out.astype(image.dtype)
+    return np.concatenate([base_frame_pose(tcp_pose_world, rotvec_reference=DOWN_ROTVEC),
+                           [float(gripper_width)]]).astype(np.float32)
 
 
 def tactile_image(rgb: np.ndarray, depth_um: np.ndarray | None, cfg: DPConfig) -> np.ndarray:
@@ -67,8 +56,12 @@ def marker_displacement(marker_initial: np.ndarray, marker_current: np.ndarray) 
 
 def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
     """The policy inputs of one step from a flat observation (rendered keys such as
-    ``extra/tcp_pose``, ``sensor_data/base_camera/rgb``, ``tactile/left/depth``; one frame each)."""
-    out = {"state": robot_state(flat["extra/tcp_pose"], float(np.asarray(flat["extra/gripper_width"]).reshape(-1)[0]))}
+    ``extra/tcp_pose``, ``sensor_data/base_camera/rgb``, ``tactile/left/depth``, one frame each:
+    :func:`~mani_skill_softvt.data.trajectory.flatten_batch` of an env observation)."""
+    # The jaw gap from the finger joints, as the env computes it: every observation path (env,
+    # rendered file, policy server) carries qpos.
+    width = float(np.asarray(flat["agent/qpos"], np.float64).reshape(-1)[-2:].sum())
+    out = {"state": robot_state(flat["extra/tcp_pose"], width)}
     for name, cam in CAMERAS.items():
         out[name] = resize_image(np.asarray(flat[f"sensor_data/{cam}/rgb"]), cfg.camera_size)
     if cfg.tactile:
@@ -80,23 +73,6 @@ def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
         out["markers"] = np.stack([marker_displacement(flat[f"tactile/{side}/marker_initial"],
                                                        flat[f"tactile/{side}/marker_current"]) for side in FINGERS])
     return out
-
-
-def flatten_env_obs(obs: dict) -> dict[str, np.ndarray]:
-    """A live env observation (nested dicts of batched (1, ...) tensors) as flat single-frame arrays
-    under the rendered files' keys."""
-    flat: dict[str, np.ndarray] = {}
-
-    def walk(prefix: str, node):
-        if isinstance(node, dict):
-            for k, v in node.items():
-                walk(f"{prefix}{k}/", v)
-        elif not isinstance(node, str):
-            x = node.detach().cpu().numpy() if hasattr(node, "detach") else np.asarray(node)
-            flat[prefix[:-1]] = x[0] if x.ndim and x.shape[0] == 1 else x
-
-    walk("", obs)
-    return flat
 
 
 def image_keys(cfg: DPConfig) -> list[str]:

@@ -62,7 +62,8 @@ class DiffusionPolicyModel(nn.Module):
         self.image_keys = image_keys(cfg)
         self.encoders = nn.ModuleDict({
             k: ImageEncoder(cfg.tactile_channels if k.startswith("tactile") else 3, cfg.encoder_widths,
-                            cfg.encoder_blocks, cfg.image_feature_dim) for k in self.image_keys})
+                            cfg.encoder_blocks, cfg.image_feature_dim, resnet_stem=cfg.resnet_stem)
+            for k in self.image_keys})
         self.normalize = nn.ModuleDict({k: RangeNormalizer(*stats[k]) for k in self.low_dim_keys + ["action"]})
         per_frame = len(self.image_keys) * cfg.image_feature_dim + cfg.state_dim
         if cfg.tactile:
@@ -91,9 +92,11 @@ class DiffusionPolicyModel(nn.Module):
         """Epsilon-prediction MSE on a batch of (B, action_horizon, 7) actions."""
         cond = self.encode(obs)
         target = self.normalize["action"](actions)
-        noise = torch.randn(target.shape, generator=generator)
+        # Drawn on the CPU generator, then moved: the same numbers on any device.
+        noise = torch.randn(target.shape, generator=generator).to(target.device)
         steps = torch.randint(0, scheduler.config.num_train_timesteps, (target.shape[0],), generator=generator)
-        noisy = scheduler.add_noise(target, noise, steps)
+        noisy = scheduler.add_noise(target, noise, steps.to(target.device))
+        steps = steps.to(target.device)
         return nn.functional.mse_loss(self.unet(noisy, steps, cond), noise)
 
     @torch.no_grad()
@@ -101,8 +104,9 @@ class DiffusionPolicyModel(nn.Module):
         """Denoise an action chunk from noise; returns (B, action_horizon, 7) in action units."""
         cond = self.encode(obs)
         x = torch.randn((cond.shape[0], self.cfg.action_horizon, self.cfg.action_dim), generator=generator)
+        x = x.to(cond.device)
         scheduler.set_timesteps(self.cfg.inference_timesteps)
         for t in scheduler.timesteps:
-            eps = self.unet(x, t.expand(x.shape[0]), cond)
+            eps = self.unet(x, t.expand(x.shape[0]).to(cond.device), cond)
             x = scheduler.step(eps, t, x, generator=generator).prev_sample
         return self.normalize["action"].inverse(x)

@@ -54,10 +54,13 @@ class ImageEncoder(nn.Module):
     """(B, C, H, W) float image in [-1, 1] -> (B, feature_dim)."""
 
     def __init__(self, in_channels: int, widths: tuple[int, ...], blocks: tuple[int, ...], feature_dim: int,
-                 keypoints: int = 32):
+                 keypoints: int = 32, resnet_stem: bool = False):
         super().__init__()
-        self.stem = nn.Sequential(nn.Conv2d(in_channels, widths[0], 3, 2, 1, bias=False),
-                                  nn.GroupNorm(_groups(widths[0]), widths[0]), nn.ReLU())
+        # ResNet-18's stem divides the image by 4 (fine at 224 px); small images keep more pixels.
+        conv = (nn.Conv2d(in_channels, widths[0], 7, 2, 3, bias=False) if resnet_stem else
+                nn.Conv2d(in_channels, widths[0], 3, 2, 1, bias=False))
+        self.stem = nn.Sequential(conv, nn.GroupNorm(_groups(widths[0]), widths[0]), nn.ReLU(),
+                                  *([nn.MaxPool2d(3, 2, 1)] if resnet_stem else []))
         layers, cin = [], widths[0]
         for i, (w, n) in enumerate(zip(widths, blocks)):
             for j in range(n):

@@ -32,7 +32,6 @@ from .dataset import DemoWindows, load_windows
 from .model import DiffusionPolicyModel, noise_scheduler
 
 CHECKPOINT, POLICY, CACHE = "checkpoint.pt", "policy.pt", "data_cache.npz"
-SHIFT_PAD = 4  # px of random shift augmentation (DrQ-style; Diffusion Policy random-crops similarly)
 
 
 def default_out(cfg: DPConfig) -> Path:
@@ -50,16 +49,22 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     return out.reshape(b, t, c, h, w).permute(0, 1, 3, 4, 2).to(images.dtype)
 
 
+def steps_per_epoch(cfg: DPConfig, samples: int) -> int:
+    """Full batches per pass over the samples (the last ``samples % batch_size`` wait for the next
+    epoch's permutation)."""
+    return max(1, samples // cfg.batch_size)
+
+
 def total_steps(cfg: DPConfig, samples: int) -> int:
     if cfg.steps is not None:
         return cfg.steps
-    return math.ceil(cfg.epochs * samples / cfg.batch_size)
+    return math.ceil(cfg.epochs * steps_per_epoch(cfg, samples))
 
 
 def batch_indices(cfg: DPConfig, samples: int, step: int) -> np.ndarray:
     """The samples of optimiser step ``step``: a fresh permutation per epoch, seeded by (seed, epoch),
     so that a resumed run draws the batches an uninterrupted one would."""
-    per_epoch = max(1, samples // cfg.batch_size)
+    per_epoch = steps_per_epoch(cfg, samples)
     epoch, k = divmod(step, per_epoch)
     perm = np.random.default_rng([cfg.seed, epoch]).permutation(samples)
     if samples < cfg.batch_size:
@@ -84,8 +89,8 @@ class Training:
         from diffusers.training_utils import EMAModel
 
         torch.manual_seed(cfg.seed)  # weight initialisation
-        self.cfg, self.steps = cfg, steps
-        self.model = DiffusionPolicyModel(cfg, stats)
+        self.cfg, self.steps, self.device = cfg, steps, torch.device(cfg.device)
+        self.model = DiffusionPolicyModel(cfg, stats).to(self.device)
         self.ema = EMAModel(self.model.parameters(), decay=cfg.ema_max_decay, use_ema_warmup=True, inv_gamma=1.0,
                             power=cfg.ema_power)
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr, betas=cfg.betas,
@@ -96,8 +101,8 @@ class Training:
         self.step = 0
         self.losses: list[float] = []
 
-    def state(self) -> dict:
-        return {"config": self.cfg.to_dict(), "steps": self.steps, "step": self.step, "model": self.model.state_dict(),
+    def state(self, data_key: str) -> dict:
+        return {"config": self.cfg.to_dict(), "steps": self.steps, "data_key": data_key, "step": self.step, "model": self.model.state_dict(),
                 "ema": self.ema.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "lr_schedule": self.lr_schedule.state_dict(), "generator": self.generator.get_state(),
                 "losses": self.losses}
@@ -113,7 +118,10 @@ class Training:
     def train_step(self, windows: DemoWindows) -> float:
         obs, actions = windows.batch(batch_indices(self.cfg, len(windows), self.step))
         for k in self.model.image_keys:
-            obs[k] = random_shift(obs[k], SHIFT_PAD, self.generator)
+            pad = max(1, round(self.cfg.shift_fraction * min(obs[k].shape[2:4])))
+            obs[k] = random_shift(obs[k], pad, self.generator)
+        obs = {k: v.to(self.device) for k, v in obs.items()}
+        actions = actions.to(self.device)
         self.model.train()
         loss = self.model.loss(obs, actions, self.generator, self.noise)
         self.optimizer.zero_grad(set_to_none=True)
@@ -127,10 +135,10 @@ class Training:
 
     def policy_state(self) -> dict:
         """The EMA weights as a model state dict (what evaluation loads)."""
-        model = DiffusionPolicyModel(self.cfg, empty_stats(self.cfg))
+        model = DiffusionPolicyModel(self.cfg, empty_stats(self.cfg)).to(self.device)
         model.load_state_dict(self.model.state_dict())
         self.ema.copy_to(model.parameters())
-        return model.state_dict()
+        return {k: v.cpu() for k, v in model.state_dict().items()}
 
 
 def save(path: Path, obj: dict) -> None:
@@ -149,11 +157,19 @@ def load_checkpoint(path: Path) -> dict:
                          "start over, or train into another --out") from None
 
 
-def check_same_run(ckpt: dict, cfg: DPConfig, path: Path) -> None:
+def check_same_run(ckpt: dict, cfg: DPConfig, path: Path, data_key: str | None = None, steps: int | None = None) -> None:
+    """Refuse to resume ``ckpt`` with another configuration, other demonstrations (regenerated or
+    re-rendered: other normalisers and batches) or another length (another schedule)."""
     if ckpt.get("config") != cfg.to_dict():
         diff = sorted(k for k in cfg.to_dict() if ckpt.get("config", {}).get(k) != cfg.to_dict()[k])
         raise ValueError(f"{path} is a run with another configuration (differs in {diff}); train into another "
                          "--out, or repeat that run's --config/--set to resume it")
+    if data_key is not None and ckpt.get("data_key") != data_key:
+        raise ValueError(f"{path} was trained on other demonstration files (generated or rendered again since); "
+                         "train into another --out, or delete it to start over on these")
+    if steps is not None and ckpt.get("steps") != steps:
+        raise ValueError(f"{path} plans {ckpt.get('steps')} steps, this run {steps} (another number of demos); "
+                         "train into another --out")
 
 
 def plot_losses(losses: list[float], path: Path, title: str) -> None:
@@ -189,6 +205,8 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
         check_same_run(ckpt, cfg, ckpt_path)
     windows = load_windows(cfg, demos_root, out / CACHE)
     steps = total_steps(cfg, len(windows))
+    if ckpt is not None:
+        check_same_run(ckpt, cfg, ckpt_path, windows.key, steps)
     run = Training(cfg, windows.stats(), steps)
     if ckpt is not None:
         run.load(ckpt)
@@ -200,7 +218,7 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
             bar.update()
             bar.set_postfix(loss=f"{loss:.4f}")
             if run.step % cfg.checkpoint_every == 0 or run.step == end:
-                save(ckpt_path, run.state())
+                save(ckpt_path, run.state(windows.key))
     policy_path = out / POLICY
     if run.step == steps:
         save(policy_path, {"config": cfg.to_dict(), "model": run.policy_state(), "steps": steps,

@@ -438,7 +438,7 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
 def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: list[dict], rows: list[dict],
                           chunk: int, file: int, fps: int, image_size: tuple[int, int] | None = None) -> None:
     """One mp4 per (video key, file) with the group's episodes back to back; fills the rows' offsets."""
-    import cv2
+    from .images import resize_image
 
     def frames():
         for ep in group:
@@ -446,9 +446,7 @@ def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: li
                 data = ren[ep["traj"]]["obs"][obs_key]
                 for i in range(ep["length"]):  # T frames, as in the data file
                     f = data[i]
-                    if image_size is not None and f.shape[:2] != tuple(image_size):
-                        f = cv2.resize(f, (image_size[1], image_size[0]), interpolation=cv2.INTER_AREA)
-                    yield f
+                    yield f if image_size is None else resize_image(f, image_size)
 
     n = encode_video(out_dir / _data_path("video", chunk, file, video_key), frames(), fps)
     if n != sum(ep["length"] for ep in group):

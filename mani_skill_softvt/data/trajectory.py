@@ -81,14 +81,15 @@ def source_desc(planners) -> str:
         f"{p}: {SOURCE_DESCS[p]}" for p in planners)
 
 
-def _flatten(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
+def flatten_batch(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
     """Env state or observation (nested dicts, batch of one) as ``{"a/b": array}`` without the batch
-    axis; strings (the instruction) are left out: a trajectory stores its instruction once."""
+    axis; strings (the instruction) are left out: a trajectory stores its instruction once. The
+    rendered files' keys, and what a baseline policy reads live (``baselines.features``)."""
     out = {}
     for k, v in tree.items():
         key = f"{prefix}/{k}" if prefix else k
         if isinstance(v, dict):
-            out.update(_flatten(v, key))
+            out.update(flatten_batch(v, key))
         elif not isinstance(v, str):
             out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
     return out
@@ -101,7 +102,7 @@ def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNE
     obs, info = env.reset(seed=seed)
     u = env.unwrapped
     name = u.target_instance
-    states = [_flatten(u.get_state_dict())]
+    states = [flatten_batch(u.get_state_dict())]
     ev = {"nodes": [u.soft_nodes(name).astype(np.float32)],
           "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u.object_names])],
           "deformation": [env.deformation_trace[-1]], "deformation_ratio": [info["deformation_ratio"]]}
@@ -118,7 +119,7 @@ def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNE
         drop.append(bool(info["dropped"][0]))
         pads = u.pad_forces()
         force.append([pads["left"], pads["right"]])
-        states.append(_flatten(u.get_state_dict()))
+        states.append(flatten_batch(u.get_state_dict()))
         ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
         ev["centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
         ev["deformation"].append(env.deformation_trace[-1])
@@ -284,7 +285,7 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                     raise CorruptDataError(f"{trajectory_h5}:{name}: env_states groups differ in length {sorted(steps)}")
                 for t in range(steps.pop()):
                     u.set_state_dict(_state_dict_at(states, t))
-                    frames.append(_flatten(u.get_obs()))
+                    frames.append(flatten_batch(u.get_obs()))
                 out = dst.create_group(name)
                 out.attrs["instruction"] = g.attrs["instruction"]
                 for k in frames[0]:

@@ -70,7 +70,9 @@ def summarize(records: list[dict]) -> dict:
     return {
         "episodes": n, "task_successes": t, "dsr_successes": d,
         "tsr": tsr, "tsr_ci95": wilson_interval(t, n), "dsr": dsr, "dsr_ci95": wilson_interval(d, n),
-        "gap": tsr - dsr, "gap_share_of_successes": (t - d) / t if t else 0.0,
+        "gap": tsr - dsr, "gap_ci95": wilson_interval(t - d, n),
+        "gap_share_of_successes": (t - d) / t if t else 0.0,
+        "gap_share_ci95": wilson_interval(t - d, t) if t else None,  # None: no successes to share
         "r_max_median": float(np.median(measured)) if measured else float("nan"),
         "tolerance_violations": sum(tolerance_violated(r) for r in records),
         "terminations": dict(sorted(terminations.items())),

@@ -12,9 +12,6 @@ import importlib
 
 import numpy as np
 
-from ..physics.transforms import quat_to_rotvec
-from ..tasks import constants as C
-
 
 class Policy:
     """What the evaluator calls: ``reset`` at each episode start, ``act`` for each action chunk."""
@@ -68,8 +65,10 @@ def _tcp_action(obs, closure: float) -> np.ndarray:
     """An action holding the TCP pose read from the observation (state_dict / rgb modes)."""
     if not isinstance(obs, dict) or "extra" not in obs:
         raise ValueError("this policy reads obs['extra']['tcp_pose']: use obs_mode state_dict, rgb or rgb+tactile")
-    pose = np.asarray(obs["extra"]["tcp_pose"]).reshape(-1)[:7].astype(np.float64)
-    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], quat_to_rotvec(pose[3:7]), [closure]]).astype(np.float32)
+    from ..tasks.robot import base_frame_pose
+
+    pose = np.asarray(obs["extra"]["tcp_pose"]).reshape(-1)[:7]
+    return np.concatenate([base_frame_pose(pose), [closure]]).astype(np.float32)
 
 
 class HoldPolicy(Policy):

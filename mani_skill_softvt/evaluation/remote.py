@@ -45,8 +45,7 @@ from openpi_client import msgpack_numpy
 from openpi_client.websocket_client_policy import WebsocketClientPolicy
 from websockets.exceptions import ConnectionClosed
 
-from ..physics.transforms import quat_to_rotvec
-from ..tasks import constants as C
+from ..tasks.robot import base_frame_pose
 from .policies import Policy
 
 ACTION_DIM = 7
@@ -74,13 +73,7 @@ def _np(x) -> np.ndarray:
 
 def base_frame_state(tcp_pose_world: np.ndarray, finger_qpos: np.ndarray) -> np.ndarray:
     """The 8-D LIBERO-style state: base-frame TCP xyz, TCP axis-angle, the two finger joints."""
-    # The base is only translated from the world; checked so that a rotated base cannot silently
-    # turn the state into something no action reproduces.
-    if not np.array_equal(C.ROBOT_BASE_POSE[3:], [1.0, 0.0, 0.0, 0.0]):
-        raise NotImplementedError(f"the base-frame state assumes an unrotated robot base, got {C.ROBOT_BASE_POSE}")
-    pose = np.asarray(tcp_pose_world, np.float64).reshape(7)
-    position = pose[:3] - C.ROBOT_BASE_POSE[:3]
-    return np.concatenate([position, quat_to_rotvec(pose[3:7]), np.asarray(finger_qpos).reshape(2)]).astype(np.float32)
+    return np.concatenate([base_frame_pose(tcp_pose_world), np.asarray(finger_qpos).reshape(2)]).astype(np.float32)
 
 
 def to_openpi_observation(obs: dict, instruction: str) -> dict:

@@ -28,7 +28,7 @@ from mani_skill.agents.controllers import PDJointPosMimicController, PDJointPosM
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.panda.panda import Panda
 
-from ..physics.transforms import down_rotvec
+from ..physics.transforms import down_rotvec, quat_to_rotvec
 from . import constants as C
 
 
@@ -45,6 +45,17 @@ def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> n
     """``pd_ee_pose`` action of the top-down hand: TCP position (world, converted to the robot base
     frame), the axis-angle of the hand turned by ``yaw``, the gripper closure."""
     return np.concatenate([position_world - C.ROBOT_BASE_POSE[:3], down_rotvec(yaw), [closure]]).astype(np.float32)
+
+
+def base_frame_pose(tcp_pose_world: np.ndarray, rotvec_reference: np.ndarray | None = None) -> np.ndarray:
+    """A world TCP pose (xyz, wxyz) as the action's pose: base-frame xyz and axis-angle (6,), the
+    axis-angle on the branch nearest ``rotvec_reference`` (see ``quat_to_rotvec``)."""
+    # The base is only translated from the world; checked so that a rotated base cannot silently
+    # turn the pose into something no action reproduces.
+    if not np.array_equal(C.ROBOT_BASE_POSE[3:], [1.0, 0.0, 0.0, 0.0]):
+        raise NotImplementedError(f"the base-frame pose assumes an unrotated robot base, got {C.ROBOT_BASE_POSE}")
+    pose = np.asarray(tcp_pose_world, np.float64).reshape(7)
+    return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], quat_to_rotvec(pose[3:7], reference=rotvec_reference)])
 
 
 def mid_height_grasp(nodes: np.ndarray) -> float:
