@@ -316,7 +316,7 @@ def main(argv=None):
         demo_set = DemoSet(args.out, args.suite)
         tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
         try:
-            info = export_lerobot(demo_set.lerobot_sources(tasks, args.obs_mode), args.lerobot_out,
+            info = export_lerobot(demo_set.rendered_sources(tasks, args.obs_mode), args.lerobot_out,
                                   use_videos=not args.no_video, image_size=_image_size(args.image_size))
         except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
             ap.error(str(err))

@@ -81,18 +81,8 @@ class DemoWindows:
 
 
 def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
-    demo_set = DemoSet(demos_root, cfg.suite)
-    out = []
-    for task in cfg.tasks:
-        traj, rendered = demo_set.trajectory(task), demo_set.rendered(task, OBS_MODE)
-        if not traj.exists():
-            raise FileNotFoundError(f"{traj} does not exist; run `python -m mani_skill_softvt.demos generate --suite "
-                                    f"{cfg.suite} --tasks {task} --out {demos_root}` first (or train on other --set tasks=)")
-        if not rendered.exists():
-            raise FileNotFoundError(f"{rendered} does not exist; run `python -m mani_skill_softvt.demos render --suite "
-                                    f"{cfg.suite} --tasks {task} --obs-mode {OBS_MODE} --out {demos_root}` first")
-        out.append((task, traj, rendered))
-    return out
+    pairs = DemoSet(demos_root, cfg.suite).rendered_sources(list(cfg.tasks), OBS_MODE)
+    return [(task, p.trajectory_h5, p.rendered_h5) for task, p in zip(cfg.tasks, pairs)]
 
 
 def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]]) -> str:

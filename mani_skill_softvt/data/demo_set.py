@@ -81,9 +81,9 @@ class DemoSet:
     def tasks_with_trajectories(self) -> list[int]:
         return [t for t in range(NUM_TASKS) if self.trajectory(t).exists()]
 
-    def lerobot_sources(self, tasks: list[int], obs_mode: str = "rgb+tactile") -> list:
-        """The (trajectory, rendered) pairs of ``tasks`` for the LeRobot export; a missing file is
-        named with the command that writes it."""
+    def rendered_sources(self, tasks: list[int], obs_mode: str = "rgb+tactile") -> list:
+        """The (trajectory, rendered) pairs of ``tasks`` (the LeRobot export's and the baselines'
+        training input); a missing file is named with the command that writes it."""
         from .lerobot import Source
 
         out = []
