@@ -86,7 +86,7 @@ def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
 
 
 def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]]) -> str:
-    files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for _, a, b in sources for p in (a, b)]
+    files = [(str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns) for _, a, b in sources for p in (a, b)]
     fields = {k: getattr(cfg, k) for k in INPUT_FIELDS}
     return hashlib.sha256(json.dumps([files, fields], default=list).encode()).hexdigest()[:16]
 
