@@ -25,8 +25,8 @@ from .train import empty_stats, load_checkpoint
 GRIPPER = 6  # the action's gripper column
 
 
-def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
-    """The config and the (EMA) model of a ``policy.pt``; a clear error for anything else."""
+def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
+    """The config and the weights (a state dict) of a ``policy.pt``; a clear error for anything else."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
@@ -36,8 +36,14 @@ def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
         raise ValueError(f"{path} is not a baseline policy file (policy.pt written at the end of training); "
                          "a checkpoint.pt is a training state: finish the run to get policy.pt")
     cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
+    return cfg, ckpt["model"]
+
+
+def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
+    """The config and the (EMA) model of a ``policy.pt``, ready for inference on the CPU."""
+    cfg, weights = read_policy_file(path)
     model = DiffusionPolicyModel(cfg, empty_stats(cfg))
-    model.load_state_dict(ckpt["model"])
+    model.load_state_dict(weights)
     model.eval()
     return cfg, model
 
@@ -52,7 +58,7 @@ def policy_name(cfg: DPConfig) -> str:
 def required_modes(path: Path) -> tuple[str, str]:
     """(obs mode, control mode) a ``policy.pt`` was trained for: rgb+tactile for VT variants, and
     the binary gripper control mode for the -b variants."""
-    cfg, _ = load_policy_file(path)
+    cfg, _ = read_policy_file(path)  # the config only: no network is built
     return ("rgb+tactile" if cfg.tactile else "rgb"), ("pd_ee_pose_binary" if cfg.binary_gripper else "pd_ee_pose")
 
 
