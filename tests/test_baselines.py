@@ -297,7 +297,7 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     path = T.train(make_config("vt-c", **TINY), tmp_path / "demos", tmp_path / "vt-c-tiny", progress=False)
     evaluate.main(["--policy", str(path), "--tasks", "3", "--out", str(tmp_path / "eval")])
     (rec,) = read_records(tmp_path / "eval" / "object_soft_id_vt-c-tiny.jsonl")
-    assert rec["receipt"]["policy"] == "diffusion_policy[vt-c]" and not rec["receipt"]["privileged"]
+    assert rec["receipt"]["policy"] == "diffusion_policy[vt-c,cpu,rgb+depth]" and not rec["receipt"]["privileged"]
     assert (rec["obs_mode"], rec["control_mode"]) == ("rgb+tactile", "pd_ee_pose")
     assert rec["termination"] in ("timeout", "dropped", "success") and rec["error"] is None
 
