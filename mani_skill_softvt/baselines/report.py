@@ -30,6 +30,9 @@ PAPER_OBJECT_SOFT = {
 }
 
 
+ENDINGS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
+
+
 def variant_of(record: dict) -> str:
     """``diffusion_policy[vt-c,cpu,rgb+depth]`` -> ``vt-c,cpu,rgb+depth`` (variant first)."""
     name = record["receipt"]["policy"]
@@ -63,13 +66,11 @@ def build(records: list[dict]) -> tuple[str, dict]:
                      f"| {_pct(s['gap'])} [{_pct(s['gap_ci95'][0])}, {_pct(s['gap_ci95'][1])}] "
                      f"| {_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
                      f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
-    lines += ["", "| variant | " + " | ".join(("success", "dropped", "timeout", "sim_unstable", "policy_error",
-                                                "worker_died")) + " | past tolerance (R_max > 1 or crushed), any end | median R_max |", "|---" * 9 + "|"]
+    columns = (*ENDINGS, "past tolerance (R_max > 1 or crushed), any end", "median R_max")
+    lines += ["", "| variant | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for key, s in data.items():
-        t = s["terminations"]
-        lines.append(f"| {key} | " + " | ".join(str(t.get(k, 0)) for k in ("success", "dropped", "timeout", "sim_unstable",
-                                                                          "policy_error", "worker_died"))
-                     + f" | {s['tolerance_violations']} | {s['r_max_median']:.3f} |")
+        ends = [str(s["terminations"].get(k, 0)) for k in ENDINGS]
+        lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['r_max_median']:.3f} |")
     return "\n".join(lines) + "\n", data
 
 
