@@ -6,9 +6,9 @@ Reads evaluation records (each verified against its hash), groups them by the po
 the receipt (``diffusion_policy[vo-c,cpu]``, ...: variant and recipe), and writes ``<out>/results.md`` and ``.json``: per
 variant the episode count, TSR and DSR with 95 % Wilson intervals, the gap TSR - DSR (successes
 that left the calibrated tolerance) and its share of the successes, how episodes ended, how many
-episodes of any ending squeezed the object past its tolerance (R_max > 1: the harm a policy that
-never succeeds still does, which TSR - DSR cannot show), and the paper's numbers for the same
-configuration.
+episodes of any ending squeezed the object past its tolerance (R_max > 1, or crushed until the
+FEM blew up: harm that TSR - DSR cannot show when a policy never succeeds), and the paper's
+numbers for the same configuration.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def build(records: list[dict]) -> tuple[str, dict]:
                      f"| {_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
                      f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
     lines += ["", "| variant | " + " | ".join(("success", "dropped", "timeout", "sim_unstable", "policy_error",
-                                                "worker_died")) + " | R_max > 1 (any end) | median R_max |", "|---" * 9 + "|"]
+                                                "worker_died")) + " | past tolerance (R_max > 1 or crushed), any end | median R_max |", "|---" * 9 + "|"]
     for key, s in data.items():
         t = s["terminations"]
         lines.append(f"| {key} | " + " | ".join(str(t.get(k, 0)) for k in ("success", "dropped", "timeout", "sim_unstable",
