@@ -28,6 +28,7 @@ from .data.demo_set import DemoSet
 from .fileio import append_jsonl, atomic_write_json
 from .parallel import run_tasks
 from .paths import DEMOS_DIR
+from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
 
@@ -206,18 +207,23 @@ def _render_task(suite: str, task_id: int, out: str, obs_mode: str, queue) -> tu
                                         task_id, obs_mode)
 
 
-def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = ()) -> bool:
+def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = (),
+                         tactile_model: int | None = None) -> bool:
     """Whether ``rendered_h5`` holds observations of exactly the episodes of ``trajectory_h5``, with
-    the ``needed`` observation keys (what this version renders), and was written after it (a re-run
-    of render skips such a task: resume)."""
+    the ``needed`` observation keys (what this version renders) and, if given, frames of that
+    ``tactile_model`` version, and was written after it (a re-run of render skips such a task:
+    resume)."""
     import h5py
+
+    from .data.trajectory import tactile_model_of
 
     if not rendered_h5.exists() or rendered_h5.stat().st_mtime_ns < trajectory_h5.stat().st_mtime_ns:
         return False
     try:
         with h5py.File(trajectory_h5, "r") as a, h5py.File(rendered_h5, "r") as b:
-            return set(a.keys()) == set(b.keys()) and all("obs" in b[k] and all(n in b[k]["obs"] for n in needed)
-                                                          for k in b.keys())
+            return set(a.keys()) == set(b.keys()) and all(
+                "obs" in b[k] and all(n in b[k]["obs"] for n in needed)
+                and (tactile_model is None or tactile_model_of(b[k]) == tactile_model) for k in b.keys())
     except OSError:  # unreadable: render it again
         return False
 
@@ -295,7 +301,8 @@ def main(argv=None):
             src = demo_set.trajectory(t)
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
-            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode), CURRENT_RENDER_KEYS.get(args.obs_mode, ())):
+            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode), CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
+                                      TACTILE_MODEL_VERSION if "tactile" in args.obs_mode else None):
                 print(f"task {t}: already rendered (delete {demo_set.rendered(t, args.obs_mode).name} to redo it)")
             else:
                 todo.append((args.suite, t, str(args.out), args.obs_mode))

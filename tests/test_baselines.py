@@ -22,6 +22,7 @@ from mani_skill_softvt.baselines.features import robot_state, tactile_image
 from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.evaluation.policies import load_policy
 from mani_skill_softvt.physics.transforms import down_quat, down_rotvec
+from mani_skill_softvt.tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from mani_skill_softvt.tasks import constants as C
 
 TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), encoder_blocks=(1, 1),
@@ -29,7 +30,7 @@ TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), 
             checkpoint_every=2, warmup_steps=2, tasks=(0,), threads=1, train_timesteps=20, inference_timesteps=4)
 
 
-def _write_demos(root, lengths=(9, 6), seed=0):
+def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSION):
     """Task 0 of object_soft: a trajectory file and its rgb+tactile rendering (random images, an
     action that moves with the state so that there is something to learn)."""
     rng = np.random.default_rng(seed)
@@ -44,6 +45,8 @@ def _write_demos(root, lengths=(9, 6), seed=0):
             g = ft.create_group(f"traj_{e}")
             g["actions"], g["actions_binary"] = a, np.where(np.arange(7) == 6, (a > 0.4), a).astype(np.float32)
             o = fr.create_group(f"traj_{e}/obs")
+            if tactile_model is not None:
+                fr[f"traj_{e}"].attrs["tactile_model"] = tactile_model
             pose = np.tile(np.r_[0.0, 0.0, 0.2, down_quat(0.1)], (t + 1, 1)).astype(np.float32)
             pose[:, 0] = np.r_[a[:, 0], a[-1, 0]] + C.ROBOT_BASE_POSE[0]
             o["extra/tcp_pose"], o["extra/gripper_width"] = pose, np.full((t + 1, 1), 0.08, np.float32)
@@ -274,6 +277,23 @@ def test_loading_a_policy_file_says_what_is_wrong(tmp_path):
     (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(ValueError, match="bad.pt cannot be read"):
         load_policy(str(tmp_path / "bad.pt"))
+
+
+def test_touch_inputs_of_another_tactile_model_are_refused(tmp_path):
+    # Frames rendered before the tactile model changed (no version kept: model 1) cannot train a
+    # VT policy; a VO policy does not read them. A VT policy file of another model is refused.
+    _write_demos(tmp_path / "old", tactile_model=None)
+    with pytest.raises(ValueError, match="tactile frames of model 1.*demos render"):
+        load_windows(make_config("vt-c", **TINY), tmp_path / "old", None)
+    load_windows(make_config("vo-c", **TINY), tmp_path / "old", None)
+    _write_demos(tmp_path / "demos")
+    path = T.train(make_config("vt-c", **TINY), tmp_path / "demos", tmp_path / "run", progress=False)
+    ckpt = torch.load(path, weights_only=False)
+    assert ckpt["tactile_model"] == TACTILE_MODEL_VERSION
+    del ckpt["tactile_model"]
+    torch.save(ckpt, tmp_path / "old.pt")
+    with pytest.raises(ValueError, match="old.pt was trained on tactile frames of model 1"):
+        load_policy(str(tmp_path / "old.pt"))
 
 
 def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):

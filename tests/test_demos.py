@@ -153,6 +153,12 @@ def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
         f.create_group("traj_1/obs")
     assert rendering_is_current(traj, rendered)
     assert not rendering_is_current(traj, rendered, needed=("tactile/left/depth",))  # from an older version
+    assert not rendering_is_current(traj, rendered, tactile_model=2)  # no version kept: model 1
+    with h5py.File(rendered, "a") as f:
+        for k in f:
+            f[k].attrs["tactile_model"] = 2
+    assert rendering_is_current(traj, rendered, tactile_model=2)
+    assert not rendering_is_current(traj, rendered, tactile_model=3)
     t = rendered.stat().st_mtime_ns
     os.utime(traj, ns=(t + 10**9, t + 10**9))  # the trajectory file was rewritten after the rendering
     assert not rendering_is_current(traj, rendered)

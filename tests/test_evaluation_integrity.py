@@ -163,3 +163,20 @@ def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_records_of_another_tactile_model_are_another_run(tmp_path):
+    # Frames of another tactile model are other observations: resuming never pools them. Records
+    # from before the version was kept count as model 1.
+    from mani_skill_softvt.evaluation.runner import run_records
+    from mani_skill_softvt.fileio import append_jsonl
+    from mani_skill_softvt.tactile.constants import MODEL_VERSION
+
+    out = tmp_path / "records.jsonl"
+    base = {"suite": "object_soft", "condition": "id", "policy": "p.pt", "obs_mode": "rgb+tactile",
+            "control_mode": "pd_ee_pose", "termination": "timeout"}
+    for task, extra in ((0, {}), (1, {"tactile_model": MODEL_VERSION})):
+        rec = {**base, "task_id": task, "seed": task, **extra}
+        append_jsonl(out, {**rec, "record_sha256": record_hash(rec)})
+    got = run_records(out, "p.pt", "rgb+tactile", "pd_ee_pose")
+    assert MODEL_VERSION > 1 and [r["task_id"] for r in got.values()] == [1]

@@ -18,7 +18,7 @@ from mani_skill_softvt.tactile import constants as C
 from mani_skill_softvt.tactile.geometry import (contact_area, contact_centroid, contact_mask,
                                                 heightmap_from_triangles, pixel_centers,
                                                 to_pixels)
-from mani_skill_softvt.tactile.markers import marker_displacements, marker_grid
+from mani_skill_softvt.tactile.markers import gel_flow, marker_displacements, marker_grid
 from mani_skill_softvt.tactile.optics import load_optics, render_image
 
 R = 0.01  # sphere radius (m)
@@ -105,7 +105,15 @@ def test_shear_moves_markers_under_the_contact_and_not_far_away():
     pressed = sensor.render_local(sphere(0.8e-3, x=x0), FACES)
     shift = np.array([0.3e-3, 0.2e-3])  # tangential translation of the (stuck) sphere
     sheared = sensor.render_local(sphere(0.8e-3, x=x0 + shift[0], y=shift[1]), FACES)
-    move = sheared.marker_current - pressed.marker_current
+    # The press moved with the sphere, and its outward flow (the dilation) with it: the shear is
+    # what the markers moved beyond the change of that flow.
+    k = sensor.downsample
+
+    def flow(verts):
+        return k * gel_flow(sensor.indentation(verts, FACES)[0], sensor.marker_grid_xy, matrix=sensor.marker_flow)
+
+    move = (sheared.marker_current - pressed.marker_current
+            - (flow(sphere(0.8e-3, x=x0 + shift[0], y=shift[1])) - flow(sphere(0.8e-3, x=x0))))
     dist = np.linalg.norm(pressed.marker_initial - to_pixels(np.array([x0, 0.0])), axis=1)
     radius_px = np.sqrt(2 * R * 0.8e-3) / C.PIXEL_SIZE  # 68 px
     under, far = dist < 0.5 * radius_px, dist > 150

@@ -15,6 +15,7 @@ from mani_skill_softvt.tactile import TactileSensor
 from mani_skill_softvt.tactile import constants as C
 from mani_skill_softvt.tactile.gel import balanced_indentation, foundation_stiffness, pressure_indentation
 from mani_skill_softvt.tactile.geometry import contact_mask, contact_polygons, polygon_area, polygons_mask
+from mani_skill_softvt.tactile.markers import flow_matrix, gel_flow
 
 K = foundation_stiffness()
 R = 0.01
@@ -171,3 +172,58 @@ def test_contact_polygons_are_the_exact_clipped_overlap():
     assert sum(polygon_area(p) for p in polys) == pytest.approx(5e-3 * 8e-3, rel=1e-9)
     mask = polygons_mask(polys)
     assert mask.sum() * C.PIXEL_SIZE ** 2 == pytest.approx(40e-6, rel=0.03)
+
+
+# ------------------------------------------------------------------ markers: the gel's outward flow
+
+
+def test_gel_flow_conserves_the_pressed_volume_around_a_uniform_disc():
+    # A disc of radius a pressed uniformly w0 into a layer of thickness h. Mass conservation with a
+    # potential flow: the mean lateral displacement is w0 r / (2 h) inside the disc and
+    # V / (2 pi h r) outside (all of V = pi a^2 w0 crossing the circle of radius r through the
+    # layer's thickness); the surface moves 1.5x the mean (parabolic profile). Tolerances: the
+    # pooled cells (4 px) against a 20 px disc: 3 % outside it; inside, a point 1.5 cells from the
+    # centre sees the cells' discreteness, 8 % and 6 deg.
+    rows, cols = np.mgrid[0:120, 0:160]
+    a, w0, h = 20.0, 50e-6, C.GEL_THICKNESS
+    ind = np.where(np.hypot(cols - 80.5, rows - 60.5) <= a, w0, 0.0)
+    volume = ind.sum()  # m x px^2
+    for r in (6.0, 10.0, 14.0, 26.0, 40.0, 58.0):
+        for direction in ((1, 0), (0, 1), (-0.6, 0.8)):
+            point = np.array([[80.5, 60.5]]) + r * np.array(direction)
+            u = gel_flow(ind, point, h)[0]
+            mean = w0 * r / (2 * h) if r < a else volume / (2 * np.pi * h * r)
+            assert u @ direction == pytest.approx(C.FLOW_SURFACE_FACTOR * mean, rel=0.08 if r < a else 0.03), (r, direction)
+            assert abs(u[0] * direction[1] - u[1] * direction[0]) < np.sin(np.deg2rad(6)) * np.linalg.norm(u)  # radial
+    # Linear in the indentation, zero without it, and the same with a prebuilt matrix.
+    point = np.array([[120.0, 30.0]])
+    np.testing.assert_allclose(gel_flow(2 * ind, point, h), 2 * gel_flow(ind, point, h))
+    assert not gel_flow(np.zeros_like(ind), point, h).any()
+    np.testing.assert_array_equal(gel_flow(ind, point, h, matrix=flow_matrix(point, ind.shape, h)), gel_flow(ind, point, h))
+
+
+@pytest.mark.parametrize("deformable", [True, False])
+def test_markers_dilate_outward_and_more_with_more_force(deformable):
+    # A rigid sphere pressed onto the gel with growing force (the gel conforms: balanced
+    # indentation), or the same sphere's overlap with the pad carrying the force (pressure
+    # indentation, as for an FEM body). The pressed volume is F / K either way, so the markers
+    # outside the patch move outward by ~1.5 F / (2 pi h K r), proportional to the force.
+    sensor = TactileSensor("left")
+    centre = np.array([(C.IMAGE_WIDTH - 1) / 2, (C.IMAGE_HEIGHT - 1) / 2])
+    verts = touching(SPHERE) - [0.0, 0.0, 0.3e-3 if deformable else 0.0]
+    faces = np.asarray(SPHERE.faces)
+    means = []
+    for force in (1.0, 2.0, 4.0, 8.0):
+        sensor.reset()
+        frame = sensor.render_local(verts, faces, normal_force=force, deformable=deformable)
+        rel = frame.marker_initial - centre
+        r = np.maximum(np.linalg.norm(rel, axis=1), 1e-9)  # the centre marker is not outside
+        move = frame.marker_current - frame.marker_initial
+        radial = (move * rel).sum(1) / r
+        outside = r > 1.2 * np.sqrt(frame.contact.sum() / np.pi)
+        assert outside.sum() >= 40
+        assert (radial[outside] > 0).all()
+        expected = C.FLOW_SURFACE_FACTOR * force / K / (2 * np.pi * C.GEL_THICKNESS * (r * C.PIXEL_SIZE)) / C.PIXEL_SIZE
+        np.testing.assert_allclose(radial[outside], expected[outside], rtol=0.1)
+        means.append(radial[outside].mean())
+    assert all(b > a for a, b in zip(means, means[1:]))

@@ -1,6 +1,6 @@
-"""The GelSight images of real simulated grasps show the contact (slow: 22 grasps, ~4 min).
+"""The GelSight images of real simulated grasps show the contact (slow: 82 grasps, ~12 min).
 
-For each asset, the calibration grasp at four closures across its card's envelope, held in the
+For each asset and its rigid twin, the calibration grasp at four closures across its card's envelope, held in the
 air; both fingers' frames are checked against the physical contact: the part of the FEM
 surface at or past the pad's surface, within the gel, computed exactly by polygon clipping
 (env.tactile_contact_reference) -- a different computation from the sensor's rasteriser.
@@ -56,6 +56,17 @@ def held_frames(asset_id: str, closures) -> list[dict]:
     return out
 
 
+def radial_dilation(frame) -> float:
+    """Mean outward motion (px) of the markers about the patch's centroid: the dilation, without
+    the shear (a translation moves as many markers towards the centroid as away from it)."""
+    rows, cols = np.nonzero(frame.contact)
+    rel = frame.marker_initial - [cols.mean(), rows.mean()]
+    r = np.linalg.norm(rel, axis=1)
+    move = frame.marker_current - frame.marker_initial
+    keep = r > 1.0
+    return float(((move[keep] * rel[keep]).sum(1) / r[keep]).mean())
+
+
 def shape(mask: np.ndarray) -> tuple[float, float]:
     """Aspect ratio (major / minor second-moment axis) and bounding-box fill of a pixel mask."""
     rows, cols = np.nonzero(mask)
@@ -63,18 +74,26 @@ def shape(mask: np.ndarray) -> tuple[float, float]:
     return float(np.sqrt(ev[1] / ev[0])), mask.sum() / ((np.ptp(cols) + 1) * (np.ptp(rows) + 1))
 
 
-@pytest.mark.parametrize("asset_id,twin", [("soft_stw_cube_hq", False), ("soft_stw_sphere_hq", False),
-                                           ("soft_stw_cylinder_hq", False), ("soft_stw_cube_hq", True),
-                                           ("soft_stw_sphere_hq", True)])
+ASSETS = sorted(p.stem for p in CALIBRATION_DIR.glob("soft_*.json"))
+
+
+@pytest.mark.parametrize("twin", [False, True], ids=["soft", "rigid_twin"])
+@pytest.mark.parametrize("asset_id", ASSETS)
 def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin):
     card = json.loads((CALIBRATION_DIR / f"{asset_id}.json").read_text())
     closures = np.linspace(card["g_min"], card["g_max"], 4)
     snaps = held_frames(asset_id.replace("soft_", "rigid_") if twin else asset_id, closures)
+    # The soft asset is held at every closure of its envelope (that is how calibration defines
+    # it). Its rigid twin shares the envelope, and a light grasp of a faceted twin can pivot out
+    # of the pads (README, limitations): its held grasps are the ones checked, at least three.
+    lifted = [bool(s["lifted"]) for s in snaps]
+    assert all(lifted) if not twin else sum(lifted) >= 3, f"{asset_id} twin={twin}: lifted at {closures[lifted]}"
+    closures = closures[lifted]
+    snaps = [s for s in snaps if s["lifted"]]
     pixel_area = C.PIXEL_SIZE ** 2
     for side in ("left", "right"):
-        forces, areas, volumes, dilations = [], [], [], []
+        forces, areas, volumes, dilations, ratios, insides = [], [], [], [], [], []
         for g, s in zip(closures, snaps):
-            assert s["lifted"], f"{asset_id} closure {g:.2f} was not lifted"
             fr, contact = s[side]["frame"], s[side]["contact"]
             patch = fr.contact
             # The patch is the physical contact: area within 35 %, >= 80 % of it inside.
@@ -83,27 +102,25 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
             inside = (patch & contact).sum() / patch.sum()
             assert 0.65 <= ratio <= 1.35, f"{asset_id} g={g:.2f} {side}: patch / contact area {ratio:.2f}"
             assert inside >= 0.8, f"{asset_id} g={g:.2f} {side}: only {inside:.0%} of the patch in contact"
+            ratios.append(ratio)
+            insides.append(inside)
             # The image itself changes where the gel is pressed (and nowhere far from it).
             changed = np.abs(fr.image.astype(int) - s[side]["background"].astype(int)).sum(axis=2) > 0
             assert changed.any()
             forces.append(s[side]["force"])
             areas.append(patch.sum() * pixel_area)
             volumes.append(fr.depth.sum() * pixel_area)
-            dilations.append(np.linalg.norm(fr.marker_current - fr.marker_initial, axis=1).mean())
+            dilations.append(radial_dilation(fr))
         # Monotone in the grasp force over the envelope.
         assert all(b > a for a, b in zip(forces, forces[1:])), forces
-        checks = [("indentation volume", volumes)]
+        # The pressed volume is F / K on every asset, and the markers' outward flow follows it.
+        checks = [("indentation volume", volumes), ("marker dilation", dilations)]
         if not twin:
             # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
-            # 1 deg, different in each grasp): its patch area and the markers' dilation (the slope
-            # of the indentation) follow the tilt as much as the force; the volume is F / K.
+            # 1 deg, different in each grasp): its patch area follows the tilt as much as the force.
             checks.append(("area", areas))
-        # Marker dilation follows the slope of the indentation. The lying cylinder's lightest grasp
-        # is a narrow stripe whose steep sides move the markers more than its firmer grasps, which
-        # press the gel almost evenly across the whole view (the FOTS model, and a real gel, then
-        # barely move markers sideways): not monotone there (README, limitations).
-        if asset_id != "soft_stw_cylinder_hq" and not twin:
-            checks.append(("marker dilation", dilations))
+        print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, dilation "
+              f"{np.round(dilations, 2)} px, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
         for name, values in checks:
             assert spearman(forces, values) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
     # Shape: the foam ball's patch is round, the cylinder lying on its side touches along a

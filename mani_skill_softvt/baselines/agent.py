@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from ..evaluation.policies import Policy
+from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import DPConfig
 from ..data.trajectory import flatten_batch
 from .features import frame_features
@@ -36,6 +37,11 @@ def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
         raise ValueError(f"{path} is not a baseline policy file (policy.pt written at the end of training); "
                          "a checkpoint.pt is a training state: finish the run to get policy.pt")
     cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
+    trained_on = ckpt.get("tactile_model") or 1  # policy files from before the version was kept: 1
+    if cfg.tactile and trained_on != TACTILE_MODEL_VERSION:
+        raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders model "
+                         f"{TACTILE_MODEL_VERSION} (tactile.constants.MODEL_VERSION): its touch inputs would not be what it "
+                         "learned. Re-render the demos and retrain it (README, Baselines)")
     return cfg, ckpt["model"]
 
 

@@ -26,7 +26,8 @@ import torch
 from tqdm import tqdm
 
 from ..data.demo_set import DemoSet
-from ..data.trajectory import open_h5
+from ..data.trajectory import open_h5, tactile_model_of
+from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write
 from .config import DPConfig
 from .features import frame_features
@@ -108,6 +109,10 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
                 for name in names:
                     if name not in fr or "obs" not in fr[name]:
                         raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
+                    if cfg.tactile and tactile_model_of(fr[name]) != TACTILE_MODEL_VERSION:
+                        raise ValueError(f"{rendered}:{name}: tactile frames of model {tactile_model_of(fr[name])}, this "
+                                         f"package renders model {TACTILE_MODEL_VERSION}; re-render with `python -m "
+                                         f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
                     a = ft[name][column][()].astype(np.float32)
                     obs = fr[name]["obs"]
                     n = obs["extra/tcp_pose"].shape[0]

@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from ..fileio import atomic_write
 from ..paths import DEMOS_DIR, REPO_DIR
+from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import PRESETS, VARIANTS, DPConfig, make_config, parse_override
 from .dataset import DemoWindows, load_windows
 from .model import DiffusionPolicyModel, noise_scheduler
@@ -222,6 +223,7 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
     policy_path = out / POLICY
     if run.step == steps:
         save(policy_path, {"config": cfg.to_dict(), "model": run.policy_state(), "steps": steps,
+                           "tactile_model": TACTILE_MODEL_VERSION if cfg.tactile else None,
                            "episodes": windows.episodes, "samples": len(windows),
                            "train_wall_s_last_call": time.perf_counter() - t0})
         plot_losses(run.losses, out / "loss.png", f"{cfg.variant} ({cfg.preset}), {windows.episodes} demos")

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..expert.pick_place import DEFAULT_PLANNER
 from ..fileio import atomic_write, atomic_write_json
+from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
 _CLOSURE_DESC = "closure drawn from the calibrated envelope [g_min, g_max]"
 SOURCE_DESCS = {
@@ -255,6 +256,12 @@ def _state_dict_at(env_states: dict, t: int) -> dict:
     return state
 
 
+def tactile_model_of(episode_group) -> int:
+    """The tactile model version an episode's observations were rendered with (1 if unrecorded:
+    renderings from before the version was kept)."""
+    return int(episode_group.attrs.get("tactile_model", 1))
+
+
 def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str) -> int:
     """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
 
@@ -288,6 +295,8 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                     frames.append(flatten_batch(u.get_obs()))
                 out = dst.create_group(name)
                 out.attrs["instruction"] = g.attrs["instruction"]
+                if "tactile" in obs_mode:
+                    out.attrs["tactile_model"] = TACTILE_MODEL_VERSION
                 for k in frames[0]:
                     _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
                 n += 1

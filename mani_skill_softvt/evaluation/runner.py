@@ -35,6 +35,7 @@ from .. import __version__
 from ..fileio import append_jsonl, read_jsonl_lines
 from ..parallel import WorkerDiedError, run_tasks
 from ..physics.fem import SimulationInstabilityError
+from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .protocols import episode_key
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
@@ -74,8 +75,21 @@ def read_records(path: Path) -> list[dict]:
 def run_records(path: Path, policy: str, obs_mode: str, control_mode: str) -> dict[tuple, dict]:
     """The verified records of one run configuration in ``path``, by episode key (resume matches on
     the configuration: another policy, obs mode or control mode is another run)."""
-    config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode}
-    return {episode_key(r): r for r in read_records(path) if all(r.get(k) == v for k, v in config.items())}
+    config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
+              "tactile_model": tactile_model(obs_mode)}
+    return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())}
+
+
+def tactile_model(obs_mode: str) -> int | None:
+    """The tactile model version of this package's frames in ``obs_mode`` (None without touch)."""
+    return TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
+
+
+def record_field(rec: dict, key: str):
+    """A record's field; records from before the tactile model was kept have model 1."""
+    if key == "tactile_model" and key not in rec:
+        return 1 if "tactile" in str(rec.get("obs_mode")) else None
+    return rec.get(key)
 
 
 def _seal(rec: dict) -> dict:
@@ -152,6 +166,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     success = termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
+           "tactile_model": tactile_model(u.obs_mode),
            "termination": termination, "error": error,
            "success": success, "dsr_success": success and bool(info["dsr_success"]),
            "dropped": bool(info["dropped"][0]), "steps": steps, "r_max": float(env.r_max),
@@ -163,7 +178,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
 def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) -> dict:
     """The record of an episode whose process died: a failure, nothing measured (``r_max`` None)."""
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **config,
-           "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
+           "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
            "steps": None, "r_max": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
            "receipt": {"package_version": __version__, "privileged": False}}
     return _seal(rec)

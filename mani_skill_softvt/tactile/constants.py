@@ -76,17 +76,21 @@ MARKER_ROWS = 9
 MARKER_RADIUS = 3.0  # px at 320 x 240: the printed dots are ~0.35 mm across (~6 px)
 MARKER_COLOR = (30, 30, 30)  # RGB: dots read nearly black through the gel
 MARKER_DRAW_SHIFT = 4  # cv2 fixed-point bits: dots drawn at 1/16 px so sub-pixel motion shows
-# FOTS-style dilation: a marker moves by gain x sigma^2 x (-grad) of the indentation blurred by
-# a Gaussian of DILATION_SIGMA, which equals FOTS's sum over contact pixels of
-# h_i (m - c_i) exp(-|m - c_i|^2 / 2 sigma^2) (pushed away from each pressed pixel in
-# proportion to its indentation, Gaussian decay). With this gain a 10 mm sphere pressed 1 mm
-# moves the markers near its rim by up to ~2.3 px (0.13 mm), 0.5 mm by ~1.4 px: a visible
-# sub-millimetre bulge, small next to the shear a grasped object drags.
-DILATION_SIGMA = 6.0  # px (~0.35 mm): reach of the gel's lateral bulge around a press
-DILATION_GAIN = 6.0  # px of motion per unit slope of the blurred (px-unit) indentation
+# Dilation: the pressed volume flows out through the gel layer (tactile.markers.gel_flow). Its
+# only physical constants are the gel's thickness and the parabolic profile across it (no slip
+# on the acrylic, a free surface: the surface moves 1.5x the layer's mean). The indentation is
+# summed over cells of FLOW_POOL x FLOW_POOL pixels (on the gel grid: 0.47 mm, a quarter of the
+# markers' 1.7 mm spacing) before the marker sums.
+FLOW_SURFACE_FACTOR = 1.5
+FLOW_POOL = 4  # px of the grid the markers are computed on
 # Shear and twist are carried fully under the contact and decay as exp(-distance / decay)
 # outside it: the gel is bonded to the acrylic, so it drags only a margin around the patch.
 SHEAR_DECAY = 12.0  # px (~0.7 mm)
+
+# The tactile model's version. Renderings, baselines trained on them and evaluation records carry
+# it, so that frames of one model are never mixed with another's (data saved without it is 1).
+# 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's outward flow.
+MODEL_VERSION = 2
 
 # Sensor rate (the control rate: one frame per control step).
 FRAME_RATE = 20

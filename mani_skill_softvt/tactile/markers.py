@@ -3,11 +3,16 @@
 Marker positions are (col, row) pixels. A marker's displacement is the sum of three fields
 (FOTS, Zhao et al. 2024):
 
-- **dilation**: the gel bulges away from a press. FOTS moves a marker m by
-  sum_i h_i (m - c_i) exp(-|m - c_i|^2 / 2 s^2) over pressed pixels c_i of indentation h_i; that
-  sum is proportional to -grad(G_s * h)(m), so we take the slope of the Gaussian-blurred
-  indentation (cheap with OpenCV) times a gain. It points away from the press, grows with the
-  indentation and vanishes a few s outside the contact.
+- **dilation**: the gel is nearly incompressible silicone bonded to acrylic, so the volume an
+  object presses in must flow out sideways through the layer. Mass conservation over the layer
+  (thickness h) with a potential flow gives the mean lateral displacement
+  u(m) = 1 / (2 pi h) sum_j V_j (m - c_j) / |m - c_j|^2 over the pressed cells (volume V_j at
+  c_j): outward from the press, V / (2 pi h r) far from it, so it grows with the pressed
+  volume, i.e. with the force (V = F / K on the elastic foundation, :mod:`.gel`). The flow is
+  parabolic across the thickness (no slip on the acrylic, a free surface), so the surface,
+  where the markers are printed, moves 1.5x the mean. Written by hand: FOTS's dilation is a
+  fitted Gaussian of the local slope, which a wide shallow press (a soft object on a stiffer
+  gel) barely moves and which is not monotone in the force; this has no fitted constant.
 - **shear**: the contact patch's tangential translation since contact onset, carried fully by
   markers under the contact and decaying as exp(-distance / decay) outside it;
 - **twist**: the patch's rotation since onset about the contact centre, with the same decay.
@@ -59,33 +64,54 @@ def contact_weight(mask: np.ndarray, xy: np.ndarray, decay: float = C.SHEAR_DECA
     return np.where(d > _DECAY_CUTOFF * decay, 0.0, np.exp(-d / decay))
 
 
-def dilation_field(indentation_px: np.ndarray, mask: np.ndarray, sigma: float = C.DILATION_SIGMA,
-                   gain: float = C.DILATION_GAIN) -> tuple[np.ndarray, tuple[int, int]]:
-    """FOTS dilation displacement (2, h, w) px = -gain * grad(G_sigma * indentation) over the
-    contact's bounding box grown by 4 sigma (zero beyond), and that box's (row, col) origin."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
-    m = int(np.ceil(4 * sigma))
-    H, W = mask.shape
-    r0, c0 = max(0, rows[0] - m), max(0, cols[0] - m)
-    r1, c1 = min(H, rows[-1] + m + 1), min(W, cols[-1] + m + 1)
-    k = 2 * int(np.ceil(3 * sigma)) + 1
-    smooth = cv2.GaussianBlur(np.asarray(indentation_px[r0:r1, c0:c1], np.float32), (k, k), sigma,
-                              borderType=cv2.BORDER_CONSTANT)
-    gy, gx = np.gradient(smooth)
-    return -gain * np.stack([gx, gy]), (r0, c0)
+def pooled_indentation(indentation: np.ndarray, pool: int = C.FLOW_POOL) -> np.ndarray:
+    """The indentation (H, W) summed over ``pool`` x ``pool`` cells (zero-padded at the far edges),
+    flattened row-major: each cell's pressed volume in metres x pixels."""
+    ind = np.asarray(indentation, np.float64)
+    ind = np.pad(ind, ((0, -ind.shape[0] % pool), (0, -ind.shape[1] % pool)))
+    return ind.reshape(ind.shape[0] // pool, pool, ind.shape[1] // pool, pool).sum(axis=(1, 3)).ravel()
+
+
+def flow_matrix(xy: np.ndarray, shape: tuple[int, int], thickness: float = C.GEL_THICKNESS,
+                pool: int = C.FLOW_POOL, surface_factor: float = C.FLOW_SURFACE_FACTOR) -> np.ndarray:
+    """(M, 2, cells): the surface displacement (px) at each point ``xy`` (M, 2) (col, row) px per unit
+    of pooled volume in each cell of an indentation map of ``shape`` (module docstring). Depends
+    on the points and the grid only, so a sensor builds it once. The kernel is softened by half a
+    cell so that a point on a pressed cell gets a finite push."""
+    xy = np.asarray(xy, np.float64)
+    rows = (np.arange(-(-shape[0] // pool)) + 0.5) * pool - 0.5
+    cols = (np.arange(-(-shape[1] // pool)) + 0.5) * pool - 0.5
+    cy, cx = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
+    dx, dy = xy[:, 0:1] - cx, xy[:, 1:2] - cy  # (M, cells) px
+    # A cell's volume V = vol pixel^2 moves a point at r by V / (2 pi h r) metres: in pixels,
+    # vol / (2 pi h r_px), the pixel size cancels.
+    k = surface_factor / (2 * np.pi * thickness) / (dx * dx + dy * dy + (0.5 * pool) ** 2)
+    return np.stack([k * dx, k * dy], axis=1)
+
+
+def gel_flow(indentation: np.ndarray, xy: np.ndarray, thickness: float = C.GEL_THICKNESS,
+             pool: int = C.FLOW_POOL, matrix: np.ndarray | None = None) -> np.ndarray:
+    """In-plane displacement (M, 2) px of the gel's surface at ``xy`` (M, 2) (col, row) px: the
+    volume pressed in by ``indentation`` ((H, W) metres, on the same pixels) flowing out through a
+    layer of ``thickness`` (module docstring). ``matrix``: :func:`flow_matrix` of these points, if
+    built already."""
+    if matrix is None:
+        matrix = flow_matrix(xy, np.shape(indentation), thickness, pool)
+    return matrix @ pooled_indentation(indentation, pool)
 
 
 def marker_displacements(initial_xy: np.ndarray, penetration: np.ndarray, shear_px=(0.0, 0.0),
-                         twist_rad: float = 0.0, *, centre=None, pixel: float = C.PIXEL_SIZE,
-                         threshold: float = C.CONTACT_THRESHOLD, dilation_gain: float = C.DILATION_GAIN,
-                         dilation_sigma: float = C.DILATION_SIGMA, decay: float = C.SHEAR_DECAY) -> np.ndarray:
+                         twist_rad: float = 0.0, *, centre=None,
+                         threshold: float = C.CONTACT_THRESHOLD, thickness: float = C.GEL_THICKNESS,
+                         pool: int = C.FLOW_POOL, decay: float = C.SHEAR_DECAY,
+                         flow: np.ndarray | None = None) -> np.ndarray:
     """Current marker positions (M, 2) px.
 
     ``initial_xy``: (M, 2) rest positions (col, row); ``penetration``: (H, W) map in metres;
     ``shear_px``: (2,) patch translation since contact onset (cols, rows); ``twist_rad``: patch
     rotation since onset (from +col towards +row) about ``centre`` (col, row; default: the
-    contact centroid). Without contact the markers are at rest (a copy of ``initial_xy``).
+    contact centroid); ``flow``: :func:`flow_matrix` of ``initial_xy`` on this map's grid, if
+    built already. Without contact the markers are at rest (a copy of ``initial_xy``).
     """
     xy = np.asarray(initial_xy, np.float64)
     if xy.ndim != 2 or xy.shape[1] != 2:
@@ -99,15 +125,7 @@ def marker_displacements(initial_xy: np.ndarray, penetration: np.ndarray, shear_
     mask = pen > threshold
     if not mask.any():
         return xy.copy()
-    # Dilation, sampled inside its box only (zero outside by construction).
-    field, (r0, c0) = dilation_field(pen / pixel, mask, dilation_sigma, dilation_gain)
-    local = xy - (c0, r0)
-    h, w = field.shape[1:]
-    inside = (local[:, 0] >= 0) & (local[:, 0] <= w - 1) & (local[:, 1] >= 0) & (local[:, 1] <= h - 1)
-    out = xy.copy()
-    if inside.any():
-        out[inside, 0] += sample_bilinear(field[0], local[inside])
-        out[inside, 1] += sample_bilinear(field[1], local[inside])
+    out = xy + gel_flow(pen, xy, thickness, pool, flow)
     if not shear.any() and twist_rad == 0.0:
         return out
     weight = contact_weight(mask, xy, decay)[:, None]

@@ -28,7 +28,7 @@ from ..physics.transforms import planar_rigid_fit
 from .gel import (balanced_indentation, footprint_mask, foundation_stiffness, geometric_indentation,
                   pressure_indentation)
 from .geometry import gap_from_triangles, to_pixels, validate_mesh
-from .markers import draw_markers, marker_displacements, marker_grid
+from .markers import draw_markers, flow_matrix, marker_displacements, marker_grid
 from .optics import load_optics, render_image
 
 SIDES = ("left", "right")
@@ -124,6 +124,7 @@ class TactileSensor:
         self.view_half_extents = (min(half[0], C.FOV_WIDTH / 2), min(half[1], C.FOV_HEIGHT / 2))
         # Marker rest positions in gel-grid pixels (pixel centres map as (x + 0.5) / k - 0.5).
         self.marker_grid_xy = (self.marker_initial + 0.5) / downsample - 0.5
+        self.marker_flow = flow_matrix(self.marker_grid_xy, (self.view_rows, self.grid_width))
         self.extra_rows = max(0, int(np.ceil(half[1] / self.grid_pixel - self.view_rows / 2)))
         self.footprint = footprint_mask(self.view_rows + 2 * self.extra_rows, self.grid_width, self.grid_pixel, half)
         self.reset()
@@ -190,13 +191,13 @@ class TactileSensor:
             touching = cv2.resize(touching.view(np.uint8), (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
                                   interpolation=cv2.INTER_NEAREST).astype(bool)
         shear_px, twist, centre = self._patch_motion(v, f, max(sink, 0.0))
-        # The marker field on the gel grid (its fields are smooth at that scale): positions,
-        # lengths and the dilation gain (px of motion per unit slope) scale by 1 / downsample.
+        # The marker field on the gel grid (its fields are smooth at that scale): positions and
+        # lengths scale by 1 / downsample.
         k = self.downsample
         current = k * marker_displacements(
             self.marker_grid_xy, grid, np.asarray(shear_px) / k, twist,
-            centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5, pixel=self.grid_pixel,
-            dilation_gain=C.DILATION_GAIN / k, dilation_sigma=C.DILATION_SIGMA / k, decay=C.SHEAR_DECAY / k)
+            centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5, decay=C.SHEAR_DECAY / k,
+            flow=self.marker_flow)
         current = current - k * self.marker_grid_xy + self.marker_initial  # exact rest positions kept
         image = draw_markers(render_image(grid, self.optics), current)
         return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink, touching)
