@@ -154,3 +154,53 @@ def test_stiffness_shows_soft_ball_spreads_where_its_rigid_twin_digs_in():
               f"rigid {area_r} px, peak {fr.depth.max() * 1e6:.0f} um at {rigid[side]['force']:.1f} N")
         assert area_s / soft[side]["force"] > 1.5 * area_r / rigid[side]["force"]
         assert fr.depth.max() / rigid[side]["force"] > 1.5 * fs.depth.max() / soft[side]["force"]
+
+
+def hold_shear(asset_id: str, closure: float) -> tuple[np.ndarray, np.ndarray]:
+    """Over the 2 s hold of the calibration grasp, left finger: the in-plane motion (px, pad frame)
+    of the contact (the FEM nodes at or past the pad in view at both ends of the hold, mean) and of
+    the markers under it (the mean change of their displacement)."""
+    from mani_skill_softvt.tactile.sensor import world_to_pad
+
+    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
+    ends = []
+    try:
+        env.reset(seed=3)
+        u = env.unwrapped
+        yaw = yaw_between(u.rest_vertices("object"), u.settled_nodes("object"))
+
+        def on_step(phase, i, n):
+            if phase == "hold" and i in (0, n - 1):
+                frame = u.tactile_frames()["left"]
+                ends.append((world_to_pad(u.soft_nodes("object"), u.pad_pose("left")), frame))
+
+        run_grasp_script(env, GraspPlan(closure=closure, yaw=float(yaw), steps=dict(P.STEPS)), on_step=on_step)
+    finally:
+        env.close()
+    (nodes0, f0), (nodes1, f1) = ends
+    half = np.array([C.FOV_WIDTH, C.FOV_HEIGHT]) / 2
+    touching = [(n[:, 2] <= 0.0) & (np.abs(n[:, :2]) <= half).all(axis=1) for n in (nodes0, nodes1)]
+    both = touching[0] & touching[1]
+    assert both.any(), f"{asset_id} g={closure}: no node touches the pad through the hold"
+    contact = (nodes1[both, :2] - nodes0[both, :2]).mean(axis=0) / C.PIXEL_SIZE
+    px = f0.marker_initial.round().astype(int)
+    under = f0.contact[px[:, 1], px[:, 0]] & f1.contact[px[:, 1], px[:, 0]]
+    assert under.sum() >= 3
+    markers = ((f1.marker_current - f0.marker_current)[under]).mean(axis=0)
+    return contact, markers
+
+
+@pytest.mark.parametrize("asset_id", ["soft_stw_cube_hq", "soft_stw_sphere_hq"])
+def test_markers_follow_the_contact_and_a_loose_grasp_slips_where_a_firm_one_holds(asset_id):
+    """A loose grasp (the card's g_min: held, but only just) creeps down the pads under the
+    object's weight; a firm one (g_max) barely moves. The gel is stuck to the contact, so the
+    markers under it move with it: within 20 % of the contact's own in-plane motion."""
+    card = json.loads((CALIBRATION_DIR / f"{asset_id}.json").read_text())
+    (loose_c, loose_m), (firm_c, firm_m) = (hold_shear(asset_id, card[k]) for k in ("g_min", "g_max"))
+    print(f"{asset_id}: loose contact {np.round(loose_c, 2)} px, markers {np.round(loose_m, 2)}; "
+          f"firm contact {np.round(firm_c, 2)}, markers {np.round(firm_m, 2)}")
+    for contact, markers in ((loose_c, loose_m), (firm_c, firm_m)):
+        assert np.linalg.norm(markers - contact) <= 0.2 * np.linalg.norm(contact)
+    # Incipient slip: gravity drags the loose grasp's contact down (+row: the image's down is the
+    # world's down while held) several times farther than the firm one's.
+    assert loose_c[1] > 0 and np.linalg.norm(loose_m) > 3.0 * np.linalg.norm(firm_m)

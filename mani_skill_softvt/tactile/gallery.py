@@ -4,10 +4,13 @@
 
 Runs the scripted grasp on ``SoftGraspLift-v1`` for each of the ten assets and the rigid twins
 of the cube and the ball, at the middle of the asset's calibrated envelope (or ``--closure``),
-lifts and stops 10 steps into the hold. Each tile pairs the tactile image (markers drawn, their
-displacement from rest drawn as arrows magnified x20) with the gel's indentation as a heat map
-(its own scale, peak in micrometres), and the physical contact outlined in white: the FEM surface
-at or past the pad (exact polygon clipping, what the tests check the patch against).
+lifts and stops 10 steps into the hold. Each tile stacks the tactile image (markers drawn, their
+displacement from rest drawn as arrows magnified x5), the gel's shading change magnified x10
+(the image against the no-contact background with the markers drawn where they are now: faint on
+objects softer than the gel, the markers' motion is most of what the RGB carries), and the gel's
+indentation as a heat map (its own scale, peak in micrometres) with the physical contact outlined
+in white: the FEM surface at or past the pad (exact polygon clipping, what the tests check the
+patch against).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ from tqdm import tqdm
 from ..assets.cards import ASSET_IDS
 from ..paths import REPO_DIR
 
-ARROW_GAIN = 20.0
+ARROW_GAIN = 5.0  # the gel's outward flow and shear are 1-4 px
+CHANGE_GAIN = 10.0
 TWINS = ("rigid_stw_cube_hq", "rigid_stw_sphere_hq")
 
 
@@ -65,6 +69,20 @@ def heat_map(frame, contact: np.ndarray) -> np.ndarray:
     return img
 
 
+def shading_change(frame) -> np.ndarray:
+    """|image - no-contact background with the markers where they are now| per channel, magnified,
+    with its largest grey-level change written on it: the indentation's shading alone."""
+    from .markers import draw_markers
+    from .optics import load_optics
+
+    background = draw_markers(load_optics().background, frame.marker_current)
+    diff = np.abs(frame.image.astype(np.int16) - background.astype(np.int16))
+    img = np.uint8(np.clip(diff * CHANGE_GAIN, 0, 255))
+    cv2.putText(img, f"shading x{CHANGE_GAIN:.0f}, max {int(diff.max())} levels", (6, 232),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+    return img
+
+
 def overlay(frame) -> np.ndarray:
     img = frame.image.copy()
     for p0, p1 in zip(frame.marker_initial, frame.marker_current):
@@ -89,7 +107,7 @@ def main(argv=None) -> None:
         img = overlay(frame)
         cv2.putText(img, f"{asset} g={closure:.2f}", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1,
                     cv2.LINE_AA)
-        tiles.append(np.concatenate([img, heat_map(frame, contact)], axis=0))
+        tiles.append(np.concatenate([img, shading_change(frame), heat_map(frame, contact)], axis=0))
     rows = [np.concatenate(tiles[i:i + 6], axis=1) for i in range(0, len(tiles), 6)]
     save_png(np.concatenate(rows, axis=0), args.out)
     print(f"wrote {args.out}")

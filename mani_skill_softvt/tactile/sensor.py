@@ -96,10 +96,10 @@ def world_to_pad(vertices_world: np.ndarray, pad_pose_world: np.ndarray) -> np.n
 class TactileSensor:
     """One GelSight Mini on one finger. Call :meth:`reset` at episode start, :meth:`render` per frame.
 
-    Between renders it remembers the contact onset (which object vertices touched the gel, and
-    where, when contact began) to turn the patch's in-plane motion since then into marker shear
-    and twist; the onset is forgotten when contact is lost, on :meth:`reset`, or when the mesh's
-    vertex count changes.
+    Between renders it remembers where each object vertex touching the gel was when it began to
+    touch (the gel under it is stuck to it since then), to turn the patch's in-plane motion since
+    then into marker shear and twist; a vertex that leaves the gel releases it, and everything is
+    forgotten when contact is lost, on :meth:`reset`, or when the mesh's vertex count changes.
     """
 
     def __init__(self, side: str = "left", pad_half_extents=None, downsample: int = C.GEL_GRID_DOWNSAMPLE,
@@ -130,8 +130,8 @@ class TactileSensor:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the contact onset (start of an episode)."""
-        self._onset: tuple[int, np.ndarray, np.ndarray] | None = None  # (vertex count, ids, pad xy at onset)
+        """Forget the contact (start of an episode)."""
+        self._anchors: np.ndarray | None = None  # (vertices, 2) pad xy where each touched; NaN: not touching
 
     def pad_pose(self, origin: np.ndarray, normal: np.ndarray, hand_x: np.ndarray) -> np.ndarray:
         """This finger's pad pose (see :func:`finger_pad_frame`)."""
@@ -182,7 +182,7 @@ class TactileSensor:
         grid, sink = self.indentation(v, f, normal_force, deformable)
         initial = self.marker_initial.astype(np.float32)
         if not (grid > 0.0).any():
-            self._onset = None
+            self._anchors = None
             return TactileFrame(self.background_frame.copy(), initial, initial.copy(),
                                 np.zeros((C.IMAGE_HEIGHT, C.IMAGE_WIDTH)), normal_force, sink)
         depth, touching = grid, grid > 0.0
@@ -197,7 +197,7 @@ class TactileSensor:
         current = k * marker_displacements(
             self.marker_grid_xy, grid, np.asarray(shear_px) / k, twist,
             centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5, decay=C.SHEAR_DECAY / k,
-            flow=self.marker_flow)
+            flow=self.marker_flow, threshold=0.0)  # the whole patch drags the gel, not only its deep part
         current = current - k * self.marker_grid_xy + self.marker_initial  # exact rest positions kept
         image = draw_markers(render_image(grid, self.optics), current)
         return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink, touching)
@@ -209,17 +209,31 @@ class TactileSensor:
         tri_z = v[f, 2]
         hit = (tri_z.min(axis=1) < reach) & (tri_z.max(axis=1) > -C.BEHIND_PAD_CULL)
         ids = np.unique(f[hit])
-        inside = (np.abs(v[ids, 0]) <= C.FOV_WIDTH / 2) & (np.abs(v[ids, 1]) <= C.FOV_HEIGHT / 2)
-        return ids[inside] if inside.any() else ids
+        in_view = (np.abs(v[ids, 0]) <= C.FOV_WIDTH / 2) & (np.abs(v[ids, 1]) <= C.FOV_HEIGHT / 2)
+        touching = in_view & (v[ids, 2] < reach + C.CONTACT_THRESHOLD)
+        # The vertices that touch are the material that grips the gel; a triangle's other corners
+        # can lie millimetres off the pad and move with the object's rotation, not its contact.
+        for keep in (touching, in_view):
+            if keep.any():
+                return ids[keep]
+        return ids
 
     def _patch_motion(self, v: np.ndarray, f: np.ndarray, reach: float) -> tuple[np.ndarray, float, np.ndarray | None]:
-        """Shear (px, (col, row)), twist (rad) and rotation centre (px) of the contact patch since
-        onset: a 2-D rigid (Kabsch) fit of the in-plane motion of the vertices that touched at onset."""
-        if self._onset is None or self._onset[0] != len(v):
-            ids = self._contact_vertices(v, f, reach)
-            self._onset = (len(v), ids, v[ids, :2].copy())
+        """Shear (px, (col, row)), twist (rad) and rotation centre (px) of the contact patch: a 2-D
+        rigid (Kabsch) fit of the in-plane motion of the touching vertices, each since it began to
+        touch. A patch that creeps or slips on the pad drags the gel with it (a fixed onset set
+        would follow its first two or three vertices, which a rotating object moves differently)."""
+        ids = self._contact_vertices(v, f, reach)
+        if self._anchors is None or len(self._anchors) != len(v):
+            self._anchors = np.full((len(v), 2), np.nan)
+        anchors = self._anchors
+        released = np.ones(len(v), bool)
+        released[ids] = False
+        anchors[released] = np.nan
+        new = ids[np.isnan(anchors[ids, 0])]
+        anchors[new] = v[new, :2]
+        if len(new) == len(ids):  # contact onset: nothing has moved yet
             return np.zeros(2), 0.0, None
-        _, ids, xy0 = self._onset
-        angle, shift = planar_rigid_fit(xy0, v[ids, :2])
-        centre = to_pixels(xy0.mean(axis=0))  # rotation centre: the onset patch's centroid
+        angle, shift = planar_rigid_fit(anchors[ids], v[ids, :2])
+        centre = to_pixels(anchors[ids].mean(axis=0))  # rotation centre: where the patch was
         return shift / C.PIXEL_SIZE, angle, centre
