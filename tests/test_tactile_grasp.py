@@ -1,4 +1,4 @@
-"""The GelSight images of real simulated grasps show the contact (slow: 82 grasps, ~12 min).
+"""The GelSight images of real simulated grasps show the contact (slow: 84 grasps, ~10 min).
 
 For each asset and its rigid twin, the calibration grasp at four closures across its card's envelope, held in the
 air; both fingers' frames are checked against the physical contact: the part of the FEM
