@@ -221,8 +221,8 @@ class TactileSensor:
     def _patch_motion(self, v: np.ndarray, f: np.ndarray, reach: float) -> tuple[np.ndarray, float, np.ndarray | None]:
         """Shear (px, (col, row)), twist (rad) and rotation centre (px) of the contact patch: a 2-D
         rigid (Kabsch) fit of the in-plane motion of the touching vertices, each since it began to
-        touch. A patch that creeps or slips on the pad drags the gel with it (a fixed onset set
-        would follow its first two or three vertices, which a rotating object moves differently)."""
+        touch: a patch that grows, creeps or slips on the pad drags the gel under all of it, not
+        only under the two or three vertices that touched first."""
         ids = self._contact_vertices(v, f, reach)
         if self._anchors is None or len(self._anchors) != len(v):
             self._anchors = np.full((len(v), 2), np.nan)
