@@ -67,7 +67,8 @@ def _json_bytes(d: dict) -> bytes:
 
 
 def _r(x, nd=9):
-    return [round(float(v), nd) for v in x] if np.ndim(x) else round(float(x), nd)
+    # + 0.0 turns a rounded -0.0 into 0.0: the sign of a value below the rounding is noise.
+    return [round(float(v), nd) + 0.0 for v in x] if np.ndim(x) else round(float(x), nd) + 0.0
 
 
 def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION) -> dict:
@@ -133,26 +134,33 @@ def stable_rest_pose(parts) -> np.ndarray:
     z = 0. A soft asset sags onto its supports; its rigid twin, modelled in the same orientation,
     may stand on a vertex or an edge (the faceted ball, the lying cylinder) and roll away.
     trimesh's stable poses (sigma 0: deterministic) are the hull faces the centre of mass
-    projects into."""
+    projects into. Only their face normals are used: the body is tilted onto the chosen face by
+    the shortest arc, so the twin keeps its soft asset's heading (trimesh's frames add a yaw built
+    from the tiny horizontal part of a nearly vertical normal: arbitrary, up to 22 deg on these
+    assets, and different from machine to machine)."""
     import trimesh
+    from scipy.spatial.transform import Rotation
     from trimesh.poses import compute_stable_poses
-    from trimesh.transformations import quaternion_from_matrix
+
+    from ..physics.transforms import xyzw_to_wxyz
 
     meshes = [trimesh.Trimesh(v, f) for v, f in parts]
     com = sum(m.center_mass * m.volume for m in meshes) / sum(m.volume for m in meshes)
     hull = trimesh.util.concatenate(meshes).convex_hull
     transforms, probability = compute_stable_poses(hull, center_mass=com, sigma=0.0, n_samples=1)
-    angle = np.array([np.arccos(np.clip((np.trace(t[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)) for t in transforms])
+    normals = -transforms[:, 2, :3]  # outward normal (object frame) of the face each pose rests on
+    tilt = np.arccos(np.clip(-normals[:, 2], -1.0, 1.0))
     # The nearest pose can be marginal (a pastry tipped in PhysX from its 6 deg pose): among the
     # poses within REST_POSE_MAX_TILT take the widest basin (trimesh's probability), then the nearest.
-    near = np.flatnonzero(angle <= max(REST_POSE_MAX_TILT, angle.min()))
-    t = transforms[min(near, key=lambda i: (-round(float(probability[i]), 6), angle[i]))]
-    rotated = hull.vertices @ t[:3, :3].T
+    near = np.flatnonzero(tilt <= max(REST_POSE_MAX_TILT, tilt.min()))
+    i = min(near, key=lambda i: (-round(float(probability[i]), 6), tilt[i]))
+    rotation, _ = Rotation.align_vectors([[0.0, 0.0, -1.0]], [normals[i]])  # one pair: the shortest arc
+    rotated = rotation.apply(hull.vertices)
     # Keep the object where it was in xy (its footprint's centre), bottom on the table.
     lo, hi = hull.vertices.min(axis=0), hull.vertices.max(axis=0)
     rlo, rhi = rotated.min(axis=0), rotated.max(axis=0)
     p = np.array([*(0.5 * (lo + hi) - 0.5 * (rlo + rhi))[:2], -rlo[2]])
-    return np.concatenate([p, quaternion_from_matrix(t)])
+    return np.concatenate([p, xyzw_to_wxyz(rotation.as_quat())])
 
 
 # ------------------------------------------------------------------------------------ props
