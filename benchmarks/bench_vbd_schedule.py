@@ -1,11 +1,12 @@
 """What a cheaper VBD schedule would buy, and what it would cost the physics.
 
-    .venv/bin/python benchmarks/bench_vbd_schedule.py [--schedules 4x5 4x3 4x2 2x5] [--asset soft_stw_cube_hq]
+    .venv/bin/python benchmarks/bench_vbd_schedule.py [--schedules 4x5 4x3 4x2 2x5 4x5@1e-4] [--asset soft_stw_cube_hq]
 
 The soft expert's wall time is the Newton tick (README, Benchmarks): substeps x iterations VBD
 sweeps per 240 Hz tick. Fewer sweeps are faster, and they change the physics the calibration
 cards, tolerances and demonstrations were made with. For each schedule (substeps x iterations,
-the first one the package's) this runs, in one process and beside ManiSkill's PickCube-v1:
+optionally @ VBD's friction smoothing velocity in m/s; the first row is the package's) this runs, in
+one process and beside ManiSkill's PickCube-v1:
 
 - the calibration trial (grasp, lift 10 cm, hold 2 s) of one asset at the loosest closure its card
   holds (g_min) and at the middle of its envelope, same seeds: held or not, slip in the hand over
@@ -30,20 +31,24 @@ import numpy as np
 from bench_sim_speed import bench_pickcube  # same directory: the one PickCube baseline
 
 
-def parse_schedule(text: str) -> tuple[int, int]:
+def parse_schedule(text: str) -> tuple[int, int, float | None]:
+    """'4x5' or '4x5@1e-4': substeps, iterations, friction smoothing velocity (None: the package's)."""
+    sched, _, eps = text.lower().partition("@")
     try:
-        substeps, iterations = (int(x) for x in text.lower().split("x"))
+        substeps, iterations = (int(x) for x in sched.split("x"))
+        epsilon = float(eps) if eps else None
     except ValueError:
-        raise argparse.ArgumentTypeError(f"schedule '{text}': write SUBSTEPSxITERATIONS, e.g. 4x5") from None
-    if substeps < 1 or iterations < 1:
-        raise argparse.ArgumentTypeError(f"schedule '{text}': substeps and iterations must be >= 1")
-    return substeps, iterations
+        raise argparse.ArgumentTypeError(f"schedule '{text}': write SUBSTEPSxITERATIONS[@EPSILON], e.g. 4x5 or 4x5@1e-4") from None
+    if substeps < 1 or iterations < 1 or (epsilon is not None and not epsilon > 0):
+        raise argparse.ArgumentTypeError(f"schedule '{text}': substeps and iterations must be >= 1, epsilon > 0")
+    return substeps, iterations, epsilon
 
 
-def with_schedule(substeps: int, iterations: int) -> None:
+def with_schedule(substeps: int, iterations: int, epsilon: float | None, package_epsilon: float) -> None:
     from mani_skill_softvt.physics import constants as C
 
     C.NEWTON_SUBSTEPS, C.VBD_ITERATIONS = substeps, iterations
+    C.FRICTION_EPSILON = package_epsilon if epsilon is None else epsilon
 
 
 def grasp_trials(asset_id: str, closures: list[float], seed: int) -> list[dict]:
@@ -94,8 +99,10 @@ def resting_drift(asset_id: str, seed: int, seconds: float = 2.0) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--schedules", nargs="+", type=parse_schedule, default=[(4, 5), (4, 3), (4, 2), (2, 5)],
-                    help="SUBSTEPSxITERATIONS per 240 Hz tick; the first is the reference (default: the package's 4x5)")
+    ap.add_argument("--schedules", nargs="+", type=parse_schedule,
+                    default=[(4, 5, None), (4, 3, None), (4, 2, None), (2, 5, None), (4, 5, 1e-4)],
+                    help="SUBSTEPSxITERATIONS[@FRICTION_EPSILON] per 240 Hz tick; the first is the reference "
+                         "(default: the package's 4x5, cheaper ones, and 4x5 with 10x less friction smoothing)")
     ap.add_argument("--asset", default="soft_stw_cube_hq")
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--pickcube-steps", type=int, default=200)
@@ -103,20 +110,23 @@ def main() -> None:
     args = ap.parse_args()
 
     from mani_skill_softvt.calibration.cards import load_calibration_card
+    from mani_skill_softvt.physics import constants as C
 
     card = load_calibration_card(args.asset)
     closures = [card.g_min, round(0.5 * (card.g_min + card.g_max), 2)]
     pickcube = 1.0 / bench_pickcube("state", args.pickcube_steps)  # wall s per simulated s
-    rows = []
-    for substeps, iterations in args.schedules:
-        with_schedule(substeps, iterations)
+    rows, package_epsilon = [], C.FRICTION_EPSILON
+    for substeps, iterations, epsilon in args.schedules:
+        with_schedule(substeps, iterations, epsilon, package_epsilon)
         trials = grasp_trials(args.asset, closures, args.seed)
         drift = resting_drift(args.asset, args.seed)
-        rows.append({"schedule": f"{substeps}x{iterations}", "sweeps_per_tick": substeps * iterations,
+        name = f"{substeps}x{iterations}" + ("" if epsilon is None else f" @ eps {epsilon:g} m/s")
+        rows.append({"schedule": name, "sweeps_per_tick": substeps * iterations,
                      "trials": trials, "drift_mm_s": 1e3 * drift})
 
     print(f"\n{args.asset} (tau_o {card.tau_o:.4f}); PickCube-v1 physics {pickcube:.3f} wall s per simulated s "
-          f"(same run); closures g_min {closures[0]} and mid-envelope {closures[1]}, seed {args.seed}\n")
+          f"(same run); closures g_min {closures[0]} and mid-envelope {closures[1]}, seed {args.seed}; "
+          f"friction smoothing {package_epsilon:g} m/s unless the row says otherwise\n")
     print("| schedule | sweeps / tick | closure | held | slip mm | peak D / tau_o | pad N | wall s / sim s "
           "| x PickCube | resting drift mm/s |")
     print("|---|---|---|---|---|---|---|---|---|---|")

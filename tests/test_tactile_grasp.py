@@ -21,11 +21,32 @@ from mani_skill_softvt.tactile import constants as C
 
 pytestmark = pytest.mark.slow
 HOLD_STEP = 10  # control steps into the hold: lifted, at rest in the grasp
+# The gripper's force limit (10 N) binds on a rigid twin at the firm end of the envelope: two
+# grasps then press with the same force to within a few mN. Forces this close are one level.
+FORCE_TIE = 0.01  # relative
+# Grasps at one force level press the same volume F / K into the gel; what they show differs only
+# by where the patch sits and how it is tilted (1 % measured on the pastry010 twin at 10.0 N).
+SAME_FORCE_AGREEMENT = 0.10  # relative
 
 
 def spearman(a, b) -> float:
     ra, rb = np.argsort(np.argsort(a)), np.argsort(np.argsort(b))
     return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def force_levels(forces, values) -> tuple[list[float], list[float]]:
+    """Group grasps whose forces agree within FORCE_TIE (forces ascending): their order is noise.
+    Checks that each group's values agree within SAME_FORCE_AGREEMENT; returns the groups' means."""
+    groups = [[0]]
+    for i in range(1, len(forces)):
+        if forces[i] - forces[groups[-1][0]] <= FORCE_TIE * forces[groups[-1][0]]:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    for g in groups:
+        v = np.asarray(values)[g]
+        assert np.ptp(v) <= SAME_FORCE_AGREEMENT * np.abs(v).max(), f"equal forces {np.asarray(forces)[g]}: {v}"
+    return [float(np.mean(np.asarray(forces)[g])) for g in groups], [float(np.mean(np.asarray(values)[g])) for g in groups]
 
 
 def held_frames(asset_id: str, closures) -> list[dict]:
@@ -122,7 +143,9 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
         print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, dilation "
               f"{np.round(dilations, 2)} px, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
         for name, values in checks:
-            assert spearman(forces, values) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
+            levels, means = force_levels(forces, values)
+            if len(levels) > 1:
+                assert spearman(levels, means) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
     # Shape: the foam ball's patch is round, the cylinder lying on its side touches along a
     # stripe at the lightest grasp, the cube's flat face fills the gel's rectangle at the firmest.
     # Round within the FEM's resolution: ~7 mm elements make the contact a polygon of a few
