@@ -23,12 +23,14 @@ env is built (``vbd_schedule`` reads them then).
 from __future__ import annotations
 
 import argparse
-import json
 import time
+from pathlib import Path
 
 import numpy as np
 
 from bench_sim_speed import bench_pickcube  # same directory: the one PickCube baseline
+
+from mani_skill_softvt.fileio import atomic_write_json
 
 
 def parse_schedule(text: str) -> tuple[int, int, float | None]:
@@ -137,8 +139,7 @@ def main() -> None:
                   f"| {t['peak_deformation'] / card.tau_o:.3f} | {t['pad_force_n']:.2f} "
                   f"| {t['wall_per_sim_s']:.2f} | {t['wall_per_sim_s'] / pickcube:.0f}x | {r['drift_mm_s']:.3f} |")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"asset": args.asset, "pickcube_wall_per_sim_s": pickcube, "rows": rows}, f, indent=1)
+        atomic_write_json(Path(args.json), {"asset": args.asset, "pickcube_wall_per_sim_s": pickcube, "rows": rows})
 
 
 if __name__ == "__main__":
