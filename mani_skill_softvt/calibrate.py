@@ -9,6 +9,8 @@ several repeats with small pose jitter; slip is measured from the object's motio
 the hand. Writes ``calibration/<asset>.json`` (card with every sweep record, so any percentile
 can be recomputed), ``calibration/plots/<asset>.png`` and ``calibration/plots/summary.png``.
 Interrupted runs resume: finished trials are kept in ``calibration/.sweeps/<asset>.jsonl``.
+Trials and cards record the physics constants they ran under; after the physics changed,
+``--restart`` sets the old logs aside (``.sweeps/replaced/``) and sweeps from scratch.
 """
 
 from __future__ import annotations
@@ -59,6 +61,9 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--percentile", type=float, default=P.PERCENTILE)
     ap.add_argument("--quick", action="store_true", help="one asset, four closures, one repeat (smoke test)")
     ap.add_argument("--out", type=Path, default=CALIBRATION_DIR)
+    ap.add_argument("--restart", action="store_true",
+                    help="set the assets' sweep logs aside (.sweeps/replaced/) and sweep from scratch, e.g. after "
+                         "the physics changed; without it an interrupted run resumes")
     ap.add_argument("--table", action="store_true", help="print the cards in --out beside the paper's, then exit")
     args = ap.parse_args(argv)
     if args.table:
@@ -78,6 +83,9 @@ def main(argv=None) -> list[dict]:
 
     from tqdm import tqdm
 
+    if args.restart:
+        for a in assets:
+            set_aside(Path(args.out) / ".sweeps" / f"{a}.jsonl")
     total = len(assets) * len(closures) * repeats
     from .parallel import run_tasks
 
@@ -105,6 +113,18 @@ def main(argv=None) -> list[dict]:
                 pass
         plot_summary(all_cards, Path(args.out) / "plots" / "summary.png")
     return cards
+
+
+def set_aside(log: Path) -> Path | None:
+    """Move a sweep log to ``replaced/`` beside it under the first free name; never overwrites."""
+    if not log.exists():
+        return None
+    k = 0
+    while (target := log.parent / "replaced" / f"{log.stem}.{k}.jsonl").exists():
+        k += 1
+    target.parent.mkdir(parents=True, exist_ok=True)
+    log.rename(target)
+    return target
 
 
 def comparison_table(directory: Path = CALIBRATION_DIR) -> str:

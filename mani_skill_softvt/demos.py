@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .data.demo_set import DemoSet
-from .fileio import append_jsonl, atomic_write_json
+from .fileio import append_jsonl, atomic_write_json, read_json
 from .parallel import run_tasks
 from .paths import DEMOS_DIR
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
@@ -92,10 +92,17 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
     from .expert.pick_place import DEFAULT_PLANNER
 
+    from .physics.constants import physics_signature, signature_mismatch
+
     planner = planner or DEFAULT_PLANNER
     demo_set = DemoSet(out, suite)
+    if demo_set.manifest.exists():  # resuming: the new episodes must come from the same physics
+        stale = signature_mismatch(read_json(demo_set.manifest).get("physics"))
+        if stale:
+            raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
+                             f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
     atomic_write_json(demo_set.manifest, {
-        "suite": suite, "expert_planner": planner, "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
+        "suite": suite, "expert_planner": planner, "physics": physics_signature(), "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
         "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
         "note": "training and evaluation seed ranges are disjoint by construction"})
     bar = tqdm(total=len(tasks) * num, desc=f"demos {suite}", unit="demo")

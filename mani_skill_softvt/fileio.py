@@ -35,6 +35,18 @@ class CorruptLogError(ValueError):
     """A line of a JSONL log that is not JSON and is not a torn last line."""
 
 
+def read_json(path: Path) -> dict:
+    """A JSON object from ``path``; a file that does not parse or is not an object raises naming it."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e}); repair or remove it, then re-run") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}; repair or remove it, then re-run")
+    return data
+
+
 def append_jsonl(path: Path, record: dict) -> None:
     """Append one record as a line and flush it to disk (resumable logs)."""
     path = Path(path)

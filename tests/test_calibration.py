@@ -98,10 +98,41 @@ def test_malformed_cards_are_refused_with_the_file_name(tmp_path):
     good = load_calibration_card("soft_stw_cube_hq").data
     for change, match in (({"tau_o": float("inf")}, "finite"), ({"tau_o": 0.0}, "positive"),
                           ({"g_min": 0.9, "g_max": 0.4}, "g_min < g_max"), ({"g_min": 0.4, "g_max": 0.4}, "single closure"), ({"g_max": 1.5}, "g_max <= 1"),
-                          ({"g_min": "0.4"}, "finite number"), ({"asset_id": "soft_pastry001"}, "expected")):
+                          ({"g_min": "0.4"}, "finite number"), ({"asset_id": "soft_pastry001"}, "expected"),
+                          ({"physics": {**good["physics"], "FRICTION_EPSILON": 1e-3}}, "other physics.*FRICTION_EPSILON"),
+                          ({"physics": None}, "no physics signature")):
         path = card_path("soft_stw_cube_hq", tmp_path)
         path.write_text(json.dumps({**good, **change}))
         with pytest.raises(ValueError, match=match) as err:
             load_calibration_card("soft_stw_cube_hq", tmp_path)
         assert str(path) in str(err.value)
     assert CalibrationCard.from_dict(good).sha256 == load_calibration_card("soft_stw_cube_hq").sha256
+
+
+def test_committed_cards_and_sweep_logs_match_the_current_physics():
+    from mani_skill_softvt.fileio import read_jsonl
+    from mani_skill_softvt.physics.constants import physics_signature
+
+    for asset_id in CARDS:
+        assert load_calibration_card(asset_id).data["physics"] == physics_signature()
+        log = CALIBRATION_DIR / ".sweeps" / f"{asset_id}.jsonl"
+        assert all(r["physics"] == physics_signature() for r in read_jsonl(log)), log
+
+
+def test_a_sweep_log_from_other_physics_is_refused_and_restart_sets_it_aside(tmp_path):
+    from mani_skill_softvt.calibrate import set_aside
+    from mani_skill_softvt.calibration.sweep import sweep_asset
+    from mani_skill_softvt.fileio import append_jsonl, read_jsonl
+    from mani_skill_softvt.physics.constants import physics_signature
+
+    log = tmp_path / ".sweeps" / "soft_stw_cube_hq.jsonl"
+    trial = {"closure": 0.5, "repeat": 0, "held": True, "physics": {**physics_signature(), "VBD_ITERATIONS": 3.0}}
+    append_jsonl(log, trial)
+    with pytest.raises(ValueError, match=f"{log}.*VBD_ITERATIONS: recorded 3.0, now 5.0.*--restart"):
+        sweep_asset("soft_stw_cube_hq", 0, [0.5], 1, log)
+    assert read_jsonl(log) == [trial]  # refused, not rewritten
+    first = set_aside(log)
+    append_jsonl(log, trial)
+    second = set_aside(log)
+    assert not log.exists() and first != second
+    assert read_jsonl(first) == read_jsonl(second) == [trial]  # nothing overwritten or lost

@@ -35,6 +35,20 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
         assert traj["success"][-1] and ep_meta["elapsed_steps"] == t
     manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
     assert manifest["train_seeds"]["3"][1] < manifest["id_eval_seeds"]["3"][0]
+    from mani_skill_softvt.physics.constants import physics_signature
+
+    assert manifest["physics"] == physics_signature()
+
+
+def test_resuming_demos_recorded_under_other_physics_is_refused(dataset, tmp_path):
+    out, _ = dataset
+    manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
+    manifest["physics"]["FRICTION_EPSILON"] *= 10
+    (tmp_path / "object_soft").mkdir()
+    (tmp_path / "object_soft" / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ValueError, match="manifest.json.*other physics.*FRICTION_EPSILON"):
+        generate("object_soft", [3], 1, tmp_path)
+    assert json.loads((tmp_path / "object_soft" / "manifest.json").read_text()) == manifest  # left as it was
 
 
 def test_stored_states_replay_the_actions_bit_for_bit(dataset):

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..data.seeds import calibration_seed
 from ..fileio import append_jsonl, read_jsonl
+from ..physics.constants import physics_signature, signature_mismatch
 from ..physics.transforms import yaw_between
 from . import protocol as P
 from .stats import slip_distance
@@ -54,13 +55,20 @@ def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_pat
     """Run every (closure, repeat) trial not yet in ``log_path``; return all records.
 
     Each finished trial is appended to the JSONL log at once, so an interrupted sweep resumes
-    where it stopped and never repeats or loses a trial.
+    where it stopped and never repeats or loses a trial. A log whose trials ran under other
+    physics (:func:`physics_signature`) is refused rather than mixed into the new card.
     """
     import gymnasium as gym
 
     from .. import tasks  # noqa: F401  (registers SoftGraspLift-v1)
 
-    done = {(round(r["closure"], 6), r["repeat"]) for r in read_jsonl(log_path)}
+    previous = read_jsonl(log_path)
+    stale = sorted({d for r in previous for d in signature_mismatch(r.get("physics"))})
+    if stale:
+        raise ValueError(f"sweep log {log_path} holds trials run under other physics ({'; '.join(stale)}); "
+                         "move it away to recalibrate from scratch (python -m mani_skill_softvt.calibrate "
+                         f"--restart --assets {asset_id} does that)")
+    done = {(round(r["closure"], 6), r["repeat"]) for r in previous}
     todo = [(g, k) for g in closures for k in range(repeats) if (round(g, 6), k) not in done]
     if progress is not None:
         progress(len(closures) * repeats - len(todo), len(closures) * repeats)
@@ -69,7 +77,7 @@ def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_pat
         try:
             for g, k in todo:
                 rec = run_trial(env, g, calibration_seed(asset_index, g, k))
-                rec.update(asset_id=asset_id, repeat=k)
+                rec.update(asset_id=asset_id, repeat=k, physics=physics_signature())
                 append_jsonl(log_path, rec)
                 if progress is not None:
                     progress(1, None)

@@ -26,8 +26,11 @@ VBD_ITERATIONS = 5
 # 40 sweeps per tick) it holds, and 4 x 20 holds at 1.7x the wall time (measured).
 STIFF_MODULUS = 2.5e5  # Pa
 NEWTON_SUBSTEPS_STIFF = 8
-# Friction smoothing velocity [m/s]: 1e-2 lets a held object creep ~1 mm/s.
-FRICTION_EPSILON = 1e-3
+# Friction smoothing velocity [m/s]: below it VBD's Coulomb friction is a viscous drag, so a
+# resting or held object creeps. 1e-2 let a held object creep ~1 mm/s; at 1e-3 a resting cube
+# crept 0.139 mm/s, at 1e-4 0.024 mm/s with the same cost and the calibration grasp's peak D
+# within 2 % (benchmarks/bench_vbd_schedule.py).
+FRICTION_EPSILON = 1e-4
 
 # Particle-collider contact (penalty) stiffness [N/m] and damping, per contact point.
 SOFT_CONTACT_KE = 5.0e3
@@ -56,3 +59,24 @@ SPAWN_CLEARANCE = 0.5e-3
 # contact of a twin made of several convex parts does not converge: the pastry010 twin crept at
 # 2-3 mm/s (0.05 rad/s) through a whole second of damped settling; at 40 it rests (< 0.7 mm/s).
 RIGID_SOLVER_POSITION_ITERATIONS = 40
+
+
+# The constants above that shape a soft grasp; a calibration card and its sweep log record them,
+# so a card made under other physics is refused instead of scoring with a stale tolerance.
+SIGNATURE_NAMES = ("SIM_FREQ", "NEWTON_SUBSTEPS", "VBD_ITERATIONS", "STIFF_MODULUS", "NEWTON_SUBSTEPS_STIFF",
+                   "FRICTION_EPSILON", "SOFT_CONTACT_KE", "SOFT_CONTACT_KD", "PARTICLE_RADIUS", "SOFT_CONTACT_GAP",
+                   "FINGER_FRICTION", "TABLE_FRICTION")
+
+
+def physics_signature() -> dict:
+    """The grasp-shaping constants as they are now (read at call time: benchmarks override them)."""
+    values = globals()
+    return {name: float(values[name]) for name in SIGNATURE_NAMES}
+
+
+def signature_mismatch(recorded) -> list[str]:
+    """Human-readable differences between a recorded signature and the current physics."""
+    if not isinstance(recorded, dict):
+        return ["no physics signature recorded (made before signatures existed)"]
+    now = physics_signature()
+    return [f"{k}: recorded {recorded.get(k)!r}, now {v!r}" for k, v in now.items() if recorded.get(k) != v]
