@@ -176,3 +176,12 @@ def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
     t = rendered.stat().st_mtime_ns
     os.utime(traj, ns=(t + 10**9, t + 10**9))  # the trajectory file was rewritten after the rendering
     assert not rendering_is_current(traj, rendered)
+
+
+def test_the_committed_samples_were_recorded_under_the_current_physics():
+    from mani_skill_softvt.paths import REPO_DIR
+    from mani_skill_softvt.physics.constants import physics_signature
+
+    for suite in ("object_soft", "object_rigid"):
+        manifest = json.loads((REPO_DIR / "demos" / "sample" / suite / "manifest.json").read_text())
+        assert manifest["physics"] == physics_signature(), suite

@@ -139,12 +139,11 @@ def test_save_restore_across_sleep_and_wake_is_bit_for_bit():
     assert np.array_equal(approach(), first)
 
 
-# The awake FEM lets a resting object drift sideways at <= 0.1 mm/s (VBD's smoothed Coulomb
-# friction has no true stiction below FRICTION_EPSILON); asleep it does not drift. Over the
-# <= 1.5 s an object sleeps before the expert grasps it, the grasp point moves by <= 0.15 mm,
-# which changed R_max by 0 to 2.8e-3 on the ten Object-Soft tasks' expert episodes, 1.7e-3 on
-# this one (README, What is simulated).
-SLEEP_R_MAX_TOLERANCE = 2e-3
+# The awake FEM lets a resting object creep sideways (VBD's smoothed Coulomb friction has no
+# true stiction below FRICTION_EPSILON: 0.024 mm/s at 1e-4 m/s); asleep it does not. The expert
+# then grasps a spot a few hundredths of a millimetre away, and R_max moves by that much: the
+# issue's bound, 1e-3, holds for this task (README, What is simulated, for all ten).
+SLEEP_R_MAX_TOLERANCE = 1e-3
 
 
 @pytest.mark.slow  # two expert episodes (~50 s)
