@@ -106,6 +106,10 @@ def test_malformed_cards_are_refused_with_the_file_name(tmp_path):
         with pytest.raises(ValueError, match=match) as err:
             load_calibration_card("soft_stw_cube_hq", tmp_path)
         assert str(path) in str(err.value)
+    for text, match in (("{x", "not valid JSON"), ("[1]", "expected a JSON object")):
+        path.write_text(text)
+        with pytest.raises(ValueError, match=f"{path}.*{match}"):
+            load_calibration_card("soft_stw_cube_hq", tmp_path)
     assert CalibrationCard.from_dict(good).sha256 == load_calibration_card("soft_stw_cube_hq").sha256
 
 

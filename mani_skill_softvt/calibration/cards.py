@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import __version__
-from ..fileio import atomic_write_json
+from ..fileio import atomic_write_json, read_json
 from ..paths import CALIBRATION_DIR
 from ..physics.constants import physics_signature, signature_mismatch
 from . import protocol as P
@@ -121,11 +121,9 @@ def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR, chec
         raise FileNotFoundError(f"no calibration card for '{asset_id}' at {path}; run "
                                 f"`python -m mani_skill_softvt.calibrate --assets {asset_id}`")
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"calibration card {path} is not valid JSON ({e}); {_RECALIBRATE}") from e
-    if not isinstance(data, dict):
-        raise ValueError(f"calibration card {path} is not a JSON object; {_RECALIBRATE}")
+        data = read_json(path)
+    except ValueError as e:
+        raise ValueError(f"calibration card {e}; or {_RECALIBRATE}") from None
     card = CalibrationCard.from_dict(data, f"calibration card {path}")
     if card.asset_id != asset_id:
         raise ValueError(f"calibration card {path} describes '{card.asset_id}', expected '{asset_id}'; {_RECALIBRATE}")
