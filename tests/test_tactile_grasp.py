@@ -17,10 +17,19 @@ from mani_skill_softvt.calibration import protocol as P
 from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
 from mani_skill_softvt.paths import CALIBRATION_DIR
 from mani_skill_softvt.physics.transforms import yaw_between
+from mani_skill_softvt.physics.deformation import kabsch
+from mani_skill_softvt.tactile.sensor import world_to_pad
 from mani_skill_softvt.tactile import constants as C
 
 pytestmark = pytest.mark.slow
 HOLD_STEP = 10  # control steps into the hold: lifted, at rest in the grasp
+# A light grasp of an irregular object can let it pivot about the pads under its weight: the
+# soft pastry003 at its g_min (1.1 N a pad) turned 6 deg in the hand between the close and the
+# hold, and its contact grew by half at constant force as another part of its surface came
+# onto the pad; at the next closure it turned 1.1 deg, above it < 0.3 deg (measured). Its area
+# then follows the new geometry, not the force, so the area's monotonicity is checked over the
+# grasps that kept their geometry.
+PIVOT_LIMIT_DEG = 3.0
 # The gripper's force limit (10 N) binds on a rigid twin at the firm end of the envelope: two
 # grasps then press with the same force to within a few mN. Forces this close are one level.
 FORCE_TIE = 0.01  # relative
@@ -61,7 +70,12 @@ def held_frames(asset_id: str, closures) -> list[dict]:
             snap = {}
 
             def on_step(phase, i, n):
+                if phase == "close" and i == n - 1:  # the object as the fingers closed on it
+                    snap["closed_nodes"] = world_to_pad(u.soft_nodes("object"), u.pad_pose("left"))
                 if phase == "hold" and i == HOLD_STEP:
+                    held = world_to_pad(u.soft_nodes("object"), u.pad_pose("left"))
+                    r, _ = kabsch(snap["closed_nodes"], held)
+                    snap["turn_deg"] = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
                     frames = u.tactile_frames()
                     for side in ("left", "right"):
                         snap[side] = dict(frame=frames[side], force=u.pad_normal_force(side),
@@ -139,13 +153,15 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
         if not twin:
             # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
             # 1 deg, different in each grasp): its patch area follows the tilt as much as the force.
-            checks.append(("area", areas))
+            still = [s["turn_deg"] <= PIVOT_LIMIT_DEG for s in snaps]
+            checks.append(("area", [a for a, k in zip(areas, still) if k]))
         print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, dilation "
-              f"{np.round(dilations, 2)} px, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
+              f"{np.round(dilations, 2)} px, turn {[round(s['turn_deg'], 1) for s in snaps]} deg, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
         for name, values in checks:
-            levels, means = force_levels(forces, values)
+            at = forces if len(values) == len(forces) else [f for f, k in zip(forces, still) if k]
+            levels, means = force_levels(at, values)
             if len(levels) > 1:
-                assert spearman(levels, means) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {forces}"
+                assert spearman(levels, means) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {at}"
     # Shape: the foam ball's patch is round, the cylinder lying on its side touches along a
     # stripe at the lightest grasp, the cube's flat face fills the gel's rectangle at the firmest.
     # Round within the FEM's resolution: ~7 mm elements make the contact a polygon of a few
@@ -183,7 +199,6 @@ def hold_shear(asset_id: str, closure: float) -> tuple[np.ndarray, np.ndarray]:
     """Over the 2 s hold of the calibration grasp, left finger: the in-plane motion (px, pad frame)
     of the contact (the FEM nodes at or past the pad in view at both ends of the hold, mean) and of
     the markers under it (the mean change of their displacement)."""
-    from mani_skill_softvt.tactile.sensor import world_to_pad
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     ends = []
