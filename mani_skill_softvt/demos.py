@@ -91,7 +91,6 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
 
     from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
     from .expert.pick_place import DEFAULT_PLANNER
-
     from .physics.constants import physics_signature, signature_mismatch
 
     planner = planner or DEFAULT_PLANNER
