@@ -11,6 +11,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import mani_skill_softvt  # noqa: F401
 from mani_skill_softvt.calibration import protocol as P
@@ -75,7 +76,7 @@ def held_frames(asset_id: str, closures) -> list[dict]:
                 if phase == "hold" and i == HOLD_STEP:
                     held = world_to_pad(u.soft_nodes("object"), u.pad_pose("left"))
                     r, _ = kabsch(snap["closed_nodes"], held)
-                    snap["turn_deg"] = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
+                    snap["turn_deg"] = float(np.degrees(Rotation.from_matrix(r).magnitude()))
                     frames = u.tactile_frames()
                     for side in ("left", "right"):
                         snap[side] = dict(frame=frames[side], force=u.pad_normal_force(side),
@@ -149,16 +150,15 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
         # Monotone in the grasp force over the envelope.
         assert all(b > a for a, b in zip(forces, forces[1:])), forces
         # The pressed volume is F / K on every asset, and the markers' outward flow follows it.
-        checks = [("indentation volume", volumes), ("marker dilation", dilations)]
+        checks = [("indentation volume", forces, volumes), ("marker dilation", forces, dilations)]
         if not twin:
             # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
             # 1 deg, different in each grasp): its patch area follows the tilt as much as the force.
-            still = [s["turn_deg"] <= PIVOT_LIMIT_DEG for s in snaps]
-            checks.append(("area", [a for a, k in zip(areas, still) if k]))
+            still = [k for k, s in enumerate(snaps) if s["turn_deg"] <= PIVOT_LIMIT_DEG]
+            checks.append(("area", [forces[k] for k in still], [areas[k] for k in still]))
         print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, dilation "
               f"{np.round(dilations, 2)} px, turn {[round(s['turn_deg'], 1) for s in snaps]} deg, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
-        for name, values in checks:
-            at = forces if len(values) == len(forces) else [f for f, k in zip(forces, still) if k]
+        for name, at, values in checks:
             levels, means = force_levels(at, values)
             if len(levels) > 1:
                 assert spearman(levels, means) >= 0.9, f"{asset_id} {side}: {name} {values} vs force {at}"
@@ -199,7 +199,6 @@ def hold_shear(asset_id: str, closure: float) -> tuple[np.ndarray, np.ndarray]:
     """Over the 2 s hold of the calibration grasp, left finger: the in-plane motion (px, pad frame)
     of the contact (the FEM nodes at or past the pad in view at both ends of the hold, mean) and of
     the markers under it (the mean change of their displacement)."""
-
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     ends = []
     try:
