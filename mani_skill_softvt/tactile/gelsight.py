@@ -88,8 +88,9 @@ class GelSight(BaseSensor):
                 "marker_initial": torch.from_numpy(f.marker_initial[None].copy()),
                 "marker_current": torch.from_numpy(f.marker_current[None].copy())}
 
-    def get_images(self) -> torch.Tensor:
-        return self.get_obs()["rgb"]
+    def get_images(self, obs: dict | None = None) -> dict[str, torch.Tensor]:
+        """What ``render_mode="sensors"`` shows: the tactile RGB frame (as ManiSkill's cameras, a dict)."""
+        return {"rgb": (obs or self.get_obs())["rgb"]}
 
     def get_params(self) -> dict:
         return {}  # no camera intrinsics: the frame's geometry is fixed (tactile.constants)

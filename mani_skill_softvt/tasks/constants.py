@@ -77,6 +77,5 @@ WRIST_CAMERA_OFFSET = (0.0465, 0.0, 0.036)  # hand frame: where the RealSense si
 WRIST_CAMERA_Q = (0.7071068, 0.0, -0.7071068, 0.0)  # wxyz: camera +x -> hand +z (along the fingers)
 RENDER_CAMERA_EYE = (0.35, 0.45, 0.4)
 RENDER_CAMERA_TARGET = (-0.05, 0.0, 0.05)
-MAX_INSTRUCTION_LENGTH = 256
 # Lowest TCP height for a grasp: the pad's half height (9.25 mm) plus 2.75 mm clearance.
 MIN_GRASP_HEIGHT = 0.012

@@ -122,10 +122,14 @@ class SoftBodyEnv(BaseEnv):
                 "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
                 "are single-threaded); use a process pool for parallel episodes"
             )
-        kwargs.setdefault("sim_backend", "physx_cpu")
-        kwargs.setdefault("render_backend", "cpu")
+        # "auto" (ManiSkill's default, and what its tools pass) means the CPU here: there is no GPU path.
+        if kwargs.get("sim_backend") in (None, "auto"):
+            kwargs["sim_backend"] = "physx_cpu"
+        if kwargs.get("render_backend") in (None, "auto"):
+            kwargs["render_backend"] = "cpu"
         if kwargs["sim_backend"] not in ("physx_cpu", "cpu"):
-            raise ValueError(f"SoftVT envs need sim_backend='physx_cpu' (got {kwargs['sim_backend']!r})")
+            raise ValueError(f"SoftVT envs need sim_backend='physx_cpu' or 'auto' (got {kwargs['sim_backend']!r}): "
+                             "the FEM coupling runs on the CPU, one env per process")
         self._world: SoftBodyWorld | None = None  # None in a scene of rigid twins
         self._coupling: SapienNewtonCoupling | None = None
         self._soft_index: dict[str, int] = {}  # soft object name -> Newton body index
@@ -175,6 +179,16 @@ class SoftBodyEnv(BaseEnv):
         if self.tactile_enabled:
             # Registered sensors are captured with the cameras; without "+tactile" they cost nothing.
             self._sensors.update({s.uid: s for s in self._tactile.values()})
+
+    def get_sensor_images(self):
+        # ManiSkill's scene pairs each registered sensor with a camera observation; the GelSights
+        # have their own (render_mode="sensors" and "all" show them beside the cameras).
+        obs = self._get_obs_sensor_data()
+        images = {name: sensor.get_images(obs[name]) for name, sensor in self.scene.sensors.items() if name in obs}
+        for name, sensor in self.scene.sensors.items():
+            if isinstance(sensor, GelSight):
+                images[name] = sensor.get_images()
+        return images
 
     def get_sensor_params(self):
         # Tactile sensors have no camera parameters: keep sensor_param to the cameras' entries.
@@ -537,7 +551,9 @@ class SoftBodyEnv(BaseEnv):
                              "bodies): it was recorded before the twins became rigid; regenerate the demonstrations")
         super().set_state_dict(self._changed_rigid_state(state), env_idx)
         if "soft" in state:
-            self._set_soft_state_vector(np.asarray(to_numpy(state["soft"]))[0])
+            # Batched (1, n) from get_state_dict, or one step (n,) as replay_trajectory hands it over.
+            soft = np.asarray(to_numpy(state["soft"]))
+            self._set_soft_state_vector(soft.reshape(-1) if soft.ndim == 1 else soft[0])
 
     def _changed_rigid_state(self, state: dict) -> dict:
         """``state`` without the actors and articulation roots that already hold exactly the stored

@@ -41,9 +41,6 @@ the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_m
 
 from __future__ import annotations
 
-import string
-
-import gymnasium as gym
 import numpy as np
 import sapien
 import torch
@@ -73,12 +70,13 @@ class SoftVTTaskEnv(SoftBodyEnv):
         obs_mode = obs_mode or "state"
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
-        self._ready = False  # dict observations carry the instruction once ManiSkill's init is done
         super().__init__(*args, obs_mode=obs_mode, **kwargs)
-        self._ready = True
 
     @property
     def instruction(self) -> str:
+        """The task's language instruction. It belongs to the env and to each recorded episode, not to
+        the observation: ManiSkill's tools (RecordEpisode, replay_trajectory, vector envs' shared memory,
+        its baseline loaders) take observations of arrays only."""
         return self.task.instruction
 
     @property
@@ -193,29 +191,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
     def _get_obs_extra(self, info):
         width = torch.tensor([[self.gripper_width]], dtype=torch.float32)
         return {"tcp_pose": self.agent.tcp.pose.raw_pose, "gripper_width": width}
-
-    def _flatten_raw_obs(self, obs):
-        obs = super()._flatten_raw_obs(obs)
-        if self._ready and isinstance(obs, dict) and self._obs_mode != "none":
-            obs["instruction"] = self.instruction
-        return obs
-
-    @property
-    def single_observation_space(self):
-        # ManiSkill derives spaces from tensors; the instruction is text.
-        space = self.__dict__.get("_obs_space_cache")
-        if space is None:
-            from mani_skill.utils import common, gym_utils
-
-            space = gym_utils.convert_observation_to_space(common.to_numpy(self._init_raw_obs), unbatched=True)
-            if isinstance(space, gym.spaces.Dict) and self._obs_mode != "none":
-                space = gym.spaces.Dict({**space.spaces, "instruction": gym.spaces.Text(C.MAX_INSTRUCTION_LENGTH, charset=string.printable)})
-            self.__dict__["_obs_space_cache"] = space
-        return space
-
-    @single_observation_space.deleter
-    def single_observation_space(self):
-        self.__dict__.pop("_obs_space_cache", None)
 
 
 for _suite in SUITES.values():
