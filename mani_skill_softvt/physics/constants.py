@@ -61,11 +61,16 @@ SPAWN_CLEARANCE = 0.5e-3
 RIGID_SOLVER_POSITION_ITERATIONS = 40
 
 
+# How the hand's orientation in a pd_ee_pose action is read: 1.0 the axis-angle the paper means
+# (tasks.robot.AxisAnglePoseController). Cards and demos made while ManiSkill's controller read it
+# as XYZ Euler angles (a scripted grasp at 20 deg of yaw then came down tilted by ~30 deg) lack it.
+EE_ORIENTATION_AXIS_ANGLE = 1.0
+
 # The constants above that shape a soft grasp; a calibration card and its sweep log record them,
 # so a card made under other physics is refused instead of scoring with a stale tolerance.
 SIGNATURE_NAMES = ("SIM_FREQ", "NEWTON_SUBSTEPS", "VBD_ITERATIONS", "STIFF_MODULUS", "NEWTON_SUBSTEPS_STIFF",
                    "FRICTION_EPSILON", "SOFT_CONTACT_KE", "SOFT_CONTACT_KD", "PARTICLE_RADIUS", "SOFT_CONTACT_GAP",
-                   "FINGER_FRICTION", "TABLE_FRICTION")
+                   "FINGER_FRICTION", "TABLE_FRICTION", "EE_ORIENTATION_AXIS_ANGLE")
 
 
 def physics_signature() -> dict:

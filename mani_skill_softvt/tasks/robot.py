@@ -4,29 +4,40 @@ Differences from ManiSkill's ``panda`` (same URDF and arm gains):
 - the gripper drive is force-limited (``GRIPPER_FORCE_LIMIT``), so a full "close" stops where
   the soft object pushes back instead of driving through it;
 - the 7-D action of the paper's policies: absolute end-effector position and axis-angle orientation
-  in the robot base frame (task-space differential IK), then one gripper value, in one of two
-  encodings (control modes):
+  in the robot base frame (task-space differential IK), then one gripper value. ManiSkill's own
+  ``pd_ee_pose`` reads those three rotation numbers as XYZ Euler angles; here they are the
+  axis-angle the paper (and the openpi/LIBERO action) means, so a top-down hand turned by a yaw
+  is pi * (cos(yaw/2), sin(yaw/2), 0) and not a hand tilted by tens of degrees;
+- beside it, the control modes a ManiSkill user reaches for: ``pd_joint_pos`` (what ManiSkill's
+  motion planners drive; arm joint targets), ``pd_joint_delta_pos`` and ``pd_ee_delta_pose``
+  (ManiSkill's normalised delta modes, what its learning baselines train on), all with ManiSkill
+  Panda's arm gains and bounds;
+- every mode has the same gripper, in two encodings (``<mode>`` and ``<mode>_binary``):
 
-  ===================  =========================================================
-  ``pd_ee_pose``        gripper closure target g in [0, 1] (0 open 80 mm, 1 fully closed)
-  ``pd_ee_pose_binary`` gripper command in {0, 1}: < 0.5 open, >= 0.5 close
-  ===================  =========================================================
+  ===========================  =====================================================
+  ``<mode>``                    gripper closure target g in [0, 1] (0 open 80 mm, 1 fully closed)
+  ``<mode>_binary``             gripper command in {0, 1}: < 0.5 open, >= 0.5 close
+  ===========================  =====================================================
 
   The closure maps linearly to the finger joint target q (half the jaw gap):
-  q = (1 - g) * GRIPPER_Q_OPEN + g * GRIPPER_Q_CLOSED.
+  q = (1 - g) * GRIPPER_Q_OPEN + g * GRIPPER_Q_CLOSED. Because the gripper value means the same in
+  every mode, ``replay_trajectory -c`` carries it over unchanged.
 """
 
 from __future__ import annotations
 
 from copy import deepcopy
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
 from gymnasium import spaces
-from mani_skill.agents.controllers import PDJointPosMimicController, PDJointPosMimicControllerConfig
+from mani_skill.agents.controllers import (PDEEPoseController, PDEEPoseControllerConfig, PDJointPosMimicController,
+                                           PDJointPosMimicControllerConfig)
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.panda.panda import Panda
+from mani_skill.utils.geometry.rotation_conversions import axis_angle_to_quaternion
+from mani_skill.utils.structs.pose import Pose
 
 from ..physics.transforms import down_rotvec, quat_to_rotvec
 from . import constants as C
@@ -63,6 +74,25 @@ def mid_height_grasp(nodes: np.ndarray) -> float:
     return float(max(C.MIN_GRASP_HEIGHT, 0.5 * (nodes[:, 2].min() + nodes[:, 2].max())))
 
 
+class AxisAnglePoseController(PDEEPoseController):
+    """ManiSkill's absolute end-effector pose controller with the orientation as an axis-angle
+    (ManiSkill's reads XYZ Euler angles). Delta modes keep ManiSkill's own controller."""
+
+    def compute_target_pose(self, prev_ee_pose_at_base, action):
+        if self.config.use_delta:
+            return super().compute_target_pose(prev_ee_pose_at_base, action)
+        return Pose.create_from_pq(action[:, 0:3], axis_angle_to_quaternion(action[:, 3:6]))
+
+
+@dataclass
+class AxisAnglePoseControllerConfig(PDEEPoseControllerConfig):
+    controller_cls = AxisAnglePoseController
+
+
+ARM_MODES = ("pd_ee_pose", "pd_joint_pos", "pd_joint_delta_pos", "pd_ee_delta_pose")
+CONTROL_MODES = tuple(m for arm in ARM_MODES for m in (arm, f"{arm}_binary"))
+
+
 class ClosureGripperController(PDJointPosMimicController):
     """Mimic finger controller commanded by a closure g in [0, 1] (or a binary open/close)."""
 
@@ -93,18 +123,24 @@ class PandaSoftVT(Panda):
 
     @property
     def _controller_configs(self):
-        arm = deepcopy(super()._controller_configs["pd_ee_pose"]["arm"])
-        grippers = {}
-        for mode, binary in (("pd_ee_pose", False), ("pd_ee_pose_binary", True)):
-            grippers[mode] = ClosureGripperControllerConfig(
-                self.gripper_joint_names,
-                lower=C.GRIPPER_Q_CLOSED,
-                upper=C.GRIPPER_Q_OPEN,
-                stiffness=self.gripper_stiffness,
-                damping=self.gripper_damping,
-                force_limit=self.gripper_force_limit,
-                normalize_action=False,
-                mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
-                binary=binary,
-            )
-        return {mode: dict(arm=deepcopy(arm), gripper=g) for mode, g in grippers.items()}
+        panda = super()._controller_configs
+        arms = {mode: deepcopy(panda[mode]["arm"]) for mode in ARM_MODES}
+        arms["pd_ee_pose"] = AxisAnglePoseControllerConfig(**{
+            f.name: getattr(arms["pd_ee_pose"], f.name) for f in fields(PDEEPoseControllerConfig)
+            if f.name != "controller_cls" and f.init})
+        configs = {}
+        for arm_mode, arm in arms.items():
+            for mode, binary in ((arm_mode, False), (f"{arm_mode}_binary", True)):
+                gripper = ClosureGripperControllerConfig(
+                    self.gripper_joint_names,
+                    lower=C.GRIPPER_Q_CLOSED,
+                    upper=C.GRIPPER_Q_OPEN,
+                    stiffness=self.gripper_stiffness,
+                    damping=self.gripper_damping,
+                    force_limit=self.gripper_force_limit,
+                    normalize_action=False,
+                    mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
+                    binary=binary,
+                )
+                configs[mode] = dict(arm=deepcopy(arm), gripper=gripper)
+        return configs
