@@ -68,3 +68,16 @@ def test_angular_velocity_of_a_known_spin():
     q1 = quat_multiply(dq, q0)  # world-frame spin: q1 = dq * q0
     w = angular_velocity_xyzw(wxyz_to_xyzw(q0)[None], wxyz_to_xyzw(q1)[None], dt)[0]
     np.testing.assert_allclose(w, omega, rtol=1e-4)
+
+
+def test_rotvec_to_quat_inverts_quat_to_rotvec():
+    from mani_skill_softvt.physics.transforms import rotvec_to_quat
+
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        q = _random_quat(rng)
+        back = rotvec_to_quat(quat_to_rotvec(q))
+        assert quat_angle(back, q) < 1e-7
+    np.testing.assert_array_equal(rotvec_to_quat(np.zeros(3)), [1.0, 0.0, 0.0, 0.0])
+    # The half-turn branch (theta - 2 pi) n is the same rotation.
+    assert quat_angle(rotvec_to_quat(down_rotvec(0.3) - 2 * np.pi * down_rotvec(0.3) / np.pi), down_quat(0.3)) < 1e-7

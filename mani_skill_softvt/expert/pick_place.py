@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, yaw_between
+from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, rotvec_to_quat, yaw_between
 from ..tasks import constants as C
 from ..tasks.robot import ee_action, mid_height_grasp
 
@@ -40,7 +40,7 @@ class ExpertPlan:
     closure: float
     waypoints: list = field(default_factory=list)  # [(phase, tcp xyz, gripper closure, yaw), ...]
     planner: str = "cartesian"  # the planner that produced this plan
-    # mplib: [(phase, TCP poses (n, 7) xyz + wxyz in the robot base frame, gripper closure, method), ...]
+    # mplib: [(phase, Segment (arm joints (n, 7) and their TCP poses in the robot base frame), gripper closure), ...]
     segments: list = field(default_factory=list)
     fallback_reason: str | None = None  # why an mplib request fell back to the Cartesian plan
 
@@ -90,9 +90,8 @@ def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict:
 
         held = held_object(nodes, [*xy, grasp_z], yaw)
         try:
-            segments = [(phase, seg.poses, gg, seg.method)
-                        for phase, seg, gg in plan_expert_path(env, plan.waypoints, PHASE_STEPS, held)]
-            steps = sum(len(poses) for _, poses, _, _ in segments)
+            segments = plan_expert_path(env, plan.waypoints, PHASE_STEPS, held)
+            steps = sum(len(seg.qpos) for _, seg, _ in segments)
             if steps >= C.MAX_EPISODE_STEPS:
                 raise PlanningError(f"the plan takes {steps} control steps, an episode at most {C.MAX_EPISODE_STEPS}")
         except PlanningError as e:
@@ -116,8 +115,8 @@ def expert_actions(env, plan: ExpertPlan):
     mplib plans replay their TCP poses; Cartesian plans move in straight lines.
     """
     if plan.planner == "mplib":
-        for phase, poses, g, _ in plan.segments:
-            for pose in poses:
+        for phase, seg, g in plan.segments:
+            for pose in seg.poses:
                 # Of the two axis-angles of a near-top-down hand, the one next to the Cartesian
                 # expert's pi * (cos yaw, sin yaw, 0): the action stream stays continuous.
                 ref = down_rotvec(down_quat_yaw(pose[3:]))
@@ -135,11 +134,50 @@ def expert_actions(env, plan: ExpertPlan):
         tcp = target
 
 
+def joint_actions(env, plan: ExpertPlan):
+    """Yield ``(phase, pd_joint_pos action)``: arm joint targets (7) and the gripper closure.
+
+    mplib plans are joint paths already (what ManiSkill's motion-planning solutions send); a
+    Cartesian plan's TCP targets are solved by IK along the way, each seeded by the last.
+    """
+    if plan.planner == "mplib":
+        for phase, seg, g in plan.segments:
+            for q in seg.qpos:
+                yield phase, np.concatenate([q, [g]]).astype(np.float32)
+        return
+    from .planner import MotionPlanner
+
+    mp = MotionPlanner(env)
+    q = env.unwrapped.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)[mp.arm]
+    for phase, action in expert_actions(env, plan):
+        pose_world = np.concatenate([action[:3].astype(np.float64) + C.ROBOT_BASE_POSE[:3],
+                                     rotvec_to_quat(action[3:6].astype(np.float64))])
+        q = mp.ik_path(q, mp.world_to_base(pose_world)[None])[0]
+        yield phase, np.concatenate([q, [action[6]]]).astype(np.float32)
+
+
+def mode_actions(env, plan: ExpertPlan):
+    """Yield ``(phase, action)`` in the env's control mode: ``pd_ee_pose`` or ``pd_joint_pos``, or
+    either's ``_binary`` twin (any commanded closure is "close": 1, else 0)."""
+    mode = env.unwrapped.control_mode
+    arm = mode.removesuffix("_binary")
+    if arm not in ("pd_ee_pose", "pd_joint_pos"):
+        raise ValueError(f"the scripted expert drives pd_ee_pose or pd_joint_pos (and their _binary modes), not "
+                         f"'{mode}': record in pd_joint_pos and convert with `python -m mani_skill_softvt.replay "
+                         f"--traj-path FILE -c {mode}`")
+    actions = expert_actions(env, plan) if arm == "pd_ee_pose" else joint_actions(env, plan)
+    for phase, action in actions:
+        if mode.endswith("_binary"):
+            action = action.copy()
+            action[-1] = np.float32(action[-1] > 0.0)
+        yield phase, action
+
+
 def run_expert(env, closure: float, on_step=None, planner: str = DEFAULT_PLANNER) -> dict:
     """Run the expert to the end of its plan or until the episode ends; return a summary."""
     plan = plan_pick_place(env, closure, planner)
     info, steps = {}, 0
-    for phase, action in expert_actions(env, plan):
+    for phase, action in mode_actions(env, plan):
         _, _, terminated, truncated, info = env.step(action)
         steps += 1
         if on_step is not None:

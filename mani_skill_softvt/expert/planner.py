@@ -202,6 +202,19 @@ class MotionPlanner:
         pm.compute_forward_kinematics(self.full_qpos(arm_q))
         return np.asarray(pm.get_link_pose(self.tcp_index), np.float64)
 
+    def ik_path(self, arm_q, poses_base) -> np.ndarray:
+        """Arm joints reaching each TCP pose (xyz, wxyz; base frame) in turn, each solve seeded by the
+        last (a Cartesian plan driven in joint space); raises :class:`PlanningError` where IK fails."""
+        pm = self.mp.pinocchio_model
+        q, out = np.asarray(arm_q, np.float64), []
+        for pose in np.asarray(poses_base, np.float64):
+            q_ik, ok, _ = pm.compute_IK_CLIK(self.tcp_index, pose, self.full_qpos(q), [])
+            if not ok:
+                raise PlanningError(f"no IK solution for the TCP pose {np.round(pose, 4).tolist()} (base frame)")
+            q = np.asarray(q_ik, np.float64)[self.arm]
+            out.append(q)
+        return np.asarray(out)
+
     def base_to_world(self, pose) -> np.ndarray:
         rot = quat_wxyz_to_matrix(self.base_pose[3:])
         p = rot @ np.asarray(pose[:3]) + self.base_pose[:3]

@@ -91,6 +91,15 @@ def quat_to_rotvec(q, reference=None) -> np.ndarray:
     return r
 
 
+def rotvec_to_quat(r) -> np.ndarray:
+    """Quaternion (wxyz) of an axis-angle ``r`` (the inverse of :func:`quat_to_rotvec` up to sign)."""
+    r = np.asarray(r, np.float64)
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[np.cos(theta / 2)], np.sin(theta / 2) * r / theta])
+
+
 # ---------------------------------------------------------------- the top-down hand
 # Every scripted grasp holds the hand pointing straight down, turned by a yaw about world z:
 # the rotation Rz(yaw) * Rx(pi), whose quaternion (w, x, y, z) is (0, cos(yaw/2), sin(yaw/2), 0).

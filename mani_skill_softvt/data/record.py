@@ -1,0 +1,130 @@
+"""ManiSkill's ``RecordEpisode`` with SoftVT's evaluator stream and episode metadata beside it.
+
+:class:`SoftVTRecordEpisode` records exactly what ``RecordEpisode`` records (``traj_<i>/obs``,
+``actions``, ``env_states`` with the FEM state, ``success``, ``fail``, ... and the ``.json`` with
+``env_info`` and one entry per episode), and adds per episode:
+
+- ``traj_<i>/evaluator/``: what scores the episode and never enters an observation: the
+  instructed object's FEM nodes (T+1, N, 3), every object's centroid (T+1, K, 3), D_t and R_t
+  (T+1), grasp, drop and pad-force events (T), and tau_o (all float32/float64/bool arrays);
+- in the episode's json entry: ``instruction``, ``target_instance``, ``r_max`` and whatever the
+  episode's producer put in :attr:`SoftVTRecordEpisode.episode_metadata` (the expert: ``closure``,
+  ``planner``).
+
+``env_info.env_id`` is written as ``mani_skill_softvt:<env id>``: gymnasium imports the module
+named before the colon, so ManiSkill's own tools (``python -m mani_skill.trajectory.replay_trajectory``,
+its worker processes included) make the env from the json without importing this package first.
+
+Wrap a DSR-wrapped env (:func:`mani_skill_softvt.evaluation.wrapper.make_env`) to get R_t; a bare
+env records D_t only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mani_skill.utils.io_utils import dump_json
+from mani_skill.utils.wrappers.record import RecordEpisode
+
+ENV_ID_MODULE = "mani_skill_softvt"
+
+
+def _flag(info: dict, key: str) -> bool:
+    """A boolean of ``info``: a batch-of-one tensor from the env or a plain value from a wrapper."""
+    v = info.get(key, False)
+    return bool(v.reshape(-1)[0]) if hasattr(v, "reshape") else bool(v)
+
+
+class SoftVTRecordEpisode(RecordEpisode):
+    """``RecordEpisode`` plus the evaluator stream and episode metadata (module docstring)."""
+
+    def __init__(self, env, output_dir, *args, **kwargs):
+        super().__init__(env, output_dir, *args, **kwargs)
+        self.episode_metadata: dict = {}
+        self._evaluator: dict[str, list] | None = None
+        info = getattr(self, "_json_data", {}).get("env_info")
+        if info is not None and ":" not in info["env_id"]:
+            info["env_id"] = f"{ENV_ID_MODULE}:{info['env_id']}"
+
+    # ------------------------------------------------------------------ stream
+    def _observe(self, info: dict, step: bool) -> None:
+        u = self.env.unwrapped
+        name = u.target_instance
+        ev = self._evaluator
+        ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
+        ev["object_centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
+        ev["deformation"].append(u.deformation(name))
+        if "deformation_ratio" in info:
+            ev["deformation_ratio"].append(float(info["deformation_ratio"]))
+        if step:
+            ev["is_grasped"].append(_flag(info, "is_grasped"))
+            ev["dropped"].append(_flag(info, "dropped"))
+            pads = u.pad_forces()
+            ev["pad_force"].append([pads["left"], pads["right"]])
+
+    def reset(self, *args, **kwargs):
+        obs, info = super().reset(*args, **kwargs)
+        self.episode_metadata = {}
+        self._evaluator = {k: [] for k in ("nodes", "object_centroids", "deformation", "deformation_ratio",
+                                           "is_grasped", "dropped", "pad_force")}
+        self._observe(info, step=False)
+        return obs, info
+
+    def step(self, action):
+        obs, rew, terminated, truncated, info = super().step(action)
+        self._observe(info, step=True)
+        return obs, rew, terminated, truncated, info
+
+    # ------------------------------------------------------------------ files
+    def flush_trajectory(self, verbose=False, ignore_empty_transition=True, env_idxs_to_flush=None, save=True):
+        before = self._episode_id
+        super().flush_trajectory(verbose, ignore_empty_transition, env_idxs_to_flush, save)
+        if save and self.save_trajectory and self._episode_id != before and self._evaluator is not None:
+            self._write_evaluator(self._h5_file[f"traj_{self._episode_id}"], self._json_data["episodes"][-1])
+            dump_json(self._json_path, self._json_data, indent=2)
+
+    def _write_evaluator(self, group, episode: dict) -> None:
+        u = self.env.unwrapped
+        ev = {k: np.asarray(v) for k, v in self._evaluator.items() if len(v)}
+        tau_o = getattr(self.env, "tau_o", None)
+        g = group.create_group("evaluator")
+        for k, v in ev.items():
+            # FEM nodes compress well; gzip is lossless and deterministic.
+            g.create_dataset(k, data=v, **({"compression": "gzip", "compression_opts": 4} if v.size > 4096 else {}))
+        if tau_o is not None:
+            g.create_dataset("tau_o", data=np.float64(tau_o))
+        episode.update(instruction=u.instruction, target_instance=u.target_instance, **self.episode_metadata)
+        if "deformation_ratio" in ev:
+            episode["r_max"] = float(ev["deformation_ratio"].max())
+
+    def close(self, close_env: bool = True) -> None:
+        """Flush and write the files; ``close_env=False`` keeps the env open (one file per episode)."""
+        if close_env:
+            super().close()
+            return
+        inner = self.env
+        self.env = _NoClose(inner)
+        try:
+            super().close()
+        finally:
+            self.env = inner
+
+
+class _NoClose:
+    """Stands in for the wrapped env while RecordEpisode closes its files but not the env."""
+
+    def __init__(self, env):
+        self._env = env
+
+    def close(self):
+        pass
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+
+def episode_paths(h5_path: Path) -> tuple[Path, Path]:
+    """A trajectory file and its json (ManiSkill pairs them by name)."""
+    h5_path = Path(h5_path)
+    return h5_path, h5_path.with_suffix(".json")

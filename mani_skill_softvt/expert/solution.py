@@ -1,0 +1,63 @@
+"""The scripted expert as a ManiSkill motion-planning solution.
+
+``solve(env, seed=None, debug=False, vis=False)`` has the signature of the solutions in
+``mani_skill.examples.motionplanning.panda.solutions``: it resets ``env`` with ``seed``, runs the
+plan and returns the last ``env.step`` result (its ``[-1]`` is the info with ``success`` and
+``elapsed_steps``), or -1 when no plan was found, as ManiSkill's runner expects. One solution
+serves all four suites (the task is one parametrised class).
+
+The plan is :func:`~mani_skill_softvt.expert.pick_place.plan_pick_place`: waypoints around the
+instructed object joined by mplib joint paths, the closure drawn from the object's calibrated
+envelope [g_min, g_max] with the episode seed. ManiSkill's ``PandaArmMotionPlanningSolver`` is
+not used: it drives a fixed open/closed gripper command (+1 / -1), while a SoftVT grasp closes to
+a calibrated closure in [0, 1] and plans around the soft object's hull and the other instance.
+The env's control mode picks the action: ``pd_joint_pos`` (the planner's joint path, ManiSkill's
+motion-planning format) or ``pd_ee_pose`` (the paper's absolute TCP pose), either ``_binary``.
+"""
+
+from __future__ import annotations
+
+from ..calibration.cards import CalibrationCard, load_calibration_card
+from ..paths import CALIBRATION_DIR
+from .pick_place import DEFAULT_PLANNER, draw_closure, mode_actions, plan_pick_place
+
+
+def expert_card(env, calibration_dir=CALIBRATION_DIR) -> CalibrationCard:
+    """The calibration card the expert draws closures from: a DSR-wrapped env's own (the scorer's),
+    else the card of the task's soft asset (rigid twins: their soft asset's)."""
+    card = getattr(env, "calibration_card", None)
+    return card if card is not None else load_calibration_card(env.unwrapped.task.soft_asset_id, calibration_dir)
+
+
+def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = None, planner: str = DEFAULT_PLANNER,
+          strict: bool = False):
+    """ManiSkill motion-planning solution of a SoftVT task (module docstring).
+
+    ``closure``: the gripper closure (default: drawn from the card's envelope with ``seed``);
+    ``planner``: "mplib" (falls back to the Cartesian plan where mplib finds no path, unless
+    ``strict``) or "cartesian". The closure and the planner that produced the plan go to the
+    recorder's episode metadata when ``env`` is a :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`.
+    """
+    from .planner import PlanningError
+
+    env.reset(seed=seed)
+    if closure is None:
+        closure = draw_closure(expert_card(env), 0 if seed is None else int(seed))
+    try:
+        plan = plan_pick_place(env, closure, planner, strict=strict)
+    except PlanningError as e:
+        if debug:
+            print(f"no motion plan for seed {seed}: {e}")
+        return -1
+    metadata = getattr(env, "episode_metadata", None)
+    if metadata is not None:
+        metadata.update(closure=float(closure), planner=plan.planner)
+    result = None
+    for _, action in mode_actions(env, plan):
+        result = env.step(action)
+        if vis:
+            env.unwrapped.render_human()
+        _, _, terminated, truncated, _ = result
+        if bool(terminated) or bool(truncated):
+            break
+    return result

@@ -1,0 +1,163 @@
+"""ManiSkill's motion-planning demo generation for the SoftVT tasks.
+
+A drop-in for ``python -m mani_skill.examples.motionplanning.panda.run`` (which knows only
+ManiSkill's own tasks): the same flags, the same output, the scripted expert as the solution
+(:func:`mani_skill_softvt.expert.solution.solve`)::
+
+    python -m mani_skill_softvt.motionplanning -e SoftVTObjectSoft-v1 --task-id 3 -n 10 --only-count-success
+    python -m mani_skill_softvt.motionplanning -e SoftVTObjectRigid-v1 -n 2 --save-video --record-dir demos
+
+Writes ``<record-dir>/<env-id>/motionplanning/<traj-name>.h5`` + ``.json`` with ManiSkill's
+``RecordEpisode`` (``source_type="motionplanning"``, actions in ``pd_joint_pos`` unless
+``--control-mode`` says otherwise), plus the evaluator stream and episode metadata
+(:mod:`mani_skill_softvt.data.record`). Replay or convert it with ``python -m mani_skill_softvt.replay``.
+Seeds are the task's training seeds (:func:`mani_skill_softvt.data.seeds.train_seed`), disjoint
+from the evaluation seeds. The benchmark's own ``python -m mani_skill_softvt.demos generate`` runs
+the same solution with the same recorder, one resumable file per episode.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import os
+from pathlib import Path
+
+import numpy as np
+
+SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
+               "around the table, target and other instance (Cartesian fallback); gripper closure drawn from the "
+               "object's calibrated envelope [g_min, g_max]")
+
+
+def parse_args(argv=None):
+    from .tasks.suites import SUITES
+
+    env_ids = sorted(s.env_id for s in SUITES.values())
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.motionplanning", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-e", "--env-id", default="SoftVTObjectSoft-v1", choices=env_ids)
+    ap.add_argument("--task-id", type=int, default=0, help="task of the suite (0-9)")
+    ap.add_argument("-o", "--obs-mode", default="none",
+                    help="observations to record (default none: replay into any obs mode later)")
+    ap.add_argument("-n", "--num-traj", type=int, default=10, help="number of trajectories to generate")
+    ap.add_argument("--only-count-success", action="store_true",
+                    help="generate until num-traj successful trajectories; save only those")
+    ap.add_argument("--reward-mode", default=None)
+    ap.add_argument("-b", "--sim-backend", default="auto", help="'auto' or 'physx_cpu' (SoftVT runs on the CPU)")
+    ap.add_argument("--render-mode", default="rgb_array", help="'rgb_array' or 'sensors': what the videos show")
+    ap.add_argument("--vis", action="store_true", help="show the solution live in SAPIEN's viewer")
+    ap.add_argument("--save-video", action="store_true")
+    ap.add_argument("--traj-name", default=None, help="name of the .h5 (default: task<task-id>)")
+    ap.add_argument("--shader", default="default")
+    ap.add_argument("--record-dir", default="demos")
+    ap.add_argument("--num-procs", type=int, default=1, help="processes, each with its own env (one core each)")
+    ap.add_argument("--control-mode", default="pd_joint_pos",
+                    help="recorded action space: pd_joint_pos (ManiSkill's), pd_ee_pose (the paper's) or a _binary twin")
+    ap.add_argument("--planner", choices=("mplib", "cartesian"), default="mplib")
+    ap.add_argument("--start-index", type=int, default=0, help="first training-seed index")
+    return ap.parse_args(argv)
+
+
+def make_recorder(env_id: str, task_id: int, output_dir: Path, traj_name: str, *, obs_mode: str = "none",
+                  control_mode: str = "pd_joint_pos", render_mode: str = "rgb_array", save_video: bool = False,
+                  reward_mode: str | None = None, shader: str = "default", sim_backend: str = "auto"):
+    """A DSR-wrapped SoftVT env inside :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`,
+    recording ``<output_dir>/<traj_name>.h5`` as ManiSkill's runner does (no save on reset)."""
+    import gymnasium as gym
+
+    from .data.record import SoftVTRecordEpisode
+    from .evaluation.wrapper import DSRWrapper
+    from .tasks import constants as C
+
+    kwargs = dict(task_id=task_id, obs_mode=obs_mode, control_mode=control_mode, render_mode=render_mode,
+                  sim_backend=sim_backend, sensor_configs=dict(shader_pack=shader),
+                  human_render_camera_configs=dict(shader_pack=shader))
+    if reward_mode is not None:
+        kwargs["reward_mode"] = reward_mode
+    env = DSRWrapper(gym.make(env_id, **kwargs))
+    return SoftVTRecordEpisode(env, output_dir=str(output_dir), trajectory_name=traj_name, save_video=save_video,
+                               source_type="motionplanning", source_desc=SOURCE_DESC, video_fps=C.CONTROL_FREQ,
+                               record_reward=False, save_on_reset=False)
+
+
+def _run(args, first: int, stride: int, count: int, traj_name: str, queue) -> str:
+    """Record ``count`` trajectories into one file, from the training seeds with indices ``first``,
+    ``first + stride``, ... (more of them on failures with --only-count-success; processes take
+    interleaved indices, so they never share a seed); puts per-trajectory progress on ``queue``."""
+    from .data.seeds import train_seed
+    from .expert.solution import solve
+
+    output_dir = Path(args.record_dir) / args.env_id / "motionplanning"
+    env = make_recorder(args.env_id, args.task_id, output_dir, traj_name, obs_mode=args.obs_mode,
+                        control_mode=args.control_mode, render_mode=args.render_mode, save_video=args.save_video,
+                        reward_mode=args.reward_mode, shader=args.shader, sim_backend=args.sim_backend)
+    index, saved = first, 0
+    while saved < count:
+        seed = train_seed(args.task_id, index)  # raises past the training range
+        index += stride
+        try:
+            res = solve(env, seed=seed, vis=args.vis, planner=args.planner)
+        except Exception as e:  # noqa: BLE001  (an episode's failure is a result, as in ManiSkill's runner)
+            print(f"seed {seed}: no valid solution: {e}")
+            res = -1
+        success = res != -1 and bool(res[-1]["success"])
+        queue.put(("tried", success))
+        if args.only_count_success and not success:
+            env.flush_trajectory(save=False)
+            if args.save_video:
+                env.flush_video(save=False)
+            continue
+        env.flush_trajectory()
+        if args.save_video:
+            env.flush_video()
+        saved += 1
+        queue.put(("saved", success))
+    env.close()
+    return str(output_dir / f"{traj_name}.h5")
+
+
+def main(argv=None) -> dict:
+    from tqdm import tqdm
+
+    from mani_skill.trajectory.merge_trajectory import merge_trajectories
+
+    from .parallel import run_tasks
+
+    args = parse_args(argv)
+    if args.num_traj < 1 or args.num_procs < 1:
+        raise SystemExit("-n and --num-procs must be >= 1")
+    name = args.traj_name or f"task{args.task_id}"
+    out = Path(args.record_dir) / args.env_id / "motionplanning" / f"{name}.h5"
+    if out.exists():
+        raise SystemExit(f"{out} exists; pass another --traj-name or move it away (nothing was overwritten)")
+    procs = min(args.num_procs, args.num_traj)
+    counts = [len(c) for c in np.array_split(np.arange(args.num_traj), procs)]
+    items = [(args, args.start_index + k, procs, n, name if procs == 1 else f"{name}.{k}")
+             for k, n in enumerate(counts)]
+    tried = succeeded = 0
+    paths = []
+    with tqdm(total=args.num_traj, desc=f"motion planning {args.env_id} task {args.task_id}", unit="traj") as bar:
+        for kind, value in run_tasks(_run, items, workers=procs):
+            if kind == "message":
+                event, success = value
+                if event == "tried":
+                    tried += 1
+                    succeeded += success
+                    bar.set_postfix(success_rate=f"{succeeded / tried:.2f}")
+                else:
+                    bar.update()
+            else:
+                paths.append(value)
+    if procs > 1:
+        merge_trajectories(str(out), sorted(paths))
+        for p in paths:
+            os.remove(p)
+            os.remove(p.replace(".h5", ".json"))
+    print(f"{out}: {args.num_traj} trajectories, expert success {succeeded}/{tried}")
+    return {"path": str(out), "tried": tried, "succeeded": succeeded}
+
+
+if __name__ == "__main__":
+    mp.set_start_method("spawn", force=True)
+    main()
