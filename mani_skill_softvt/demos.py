@@ -32,11 +32,45 @@ from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
 
-def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, queue) -> dict:
+def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], dict]:
+    """One expert episode recorded by :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`
+    into ``path`` (+ its .json), kept only if it passes the screening: returns (problems, episode).
+
+    ``env`` is a DSR-wrapped suite env, reused across episodes. The episode is written under a
+    temporary name and renamed when screened, so a killed run never leaves a half-written demo.
+    """
+    import os
+
+    from .data.record import SoftVTRecordEpisode, episode_paths
+    from .data.trajectory import read_episode, screen
+    from .expert.solution import solve
+    from .motionplanning import SOURCE_DESC
+
+    tmp_h5, tmp_json = episode_paths(path.with_name(f"{path.stem}.partial.h5"))
+    rec = SoftVTRecordEpisode(env, output_dir=str(path.parent), trajectory_name=tmp_h5.stem, save_video=False,
+                              source_type="motionplanning", source_desc=SOURCE_DESC, record_reward=False,
+                              save_on_reset=False)
+    try:
+        solve(rec, seed=seed, planner=planner)
+        rec.flush_trajectory()
+    finally:
+        rec.close(close_env=False)
+    ep = read_episode(tmp_h5)
+    problems = screen(ep)
+    if problems:
+        tmp_h5.unlink()
+        tmp_json.unlink()
+    else:
+        final_h5, final_json = episode_paths(path)
+        os.replace(tmp_json, final_json)
+        os.replace(tmp_h5, final_h5)  # last: an episode file on disk is a complete, accepted demo
+    return problems, ep
+
+
+def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, control_mode: str, queue) -> dict:
     from .data.seeds import train_seed
-    from .data.trajectory import episode_json_line, record_episode, screen, write_episode
+    from .data.trajectory import episode_json_line
     from .evaluation.wrapper import make_env
-    from .expert.pick_place import draw_closure
 
     demo_set = DemoSet(out, suite)
     done = {r["seed"] for r in demo_set.read_qc(task_id)}
@@ -47,12 +81,10 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
             queue.put(1)
             continue
         if env is None:
-            env = make_env(suite, task_id, obs_mode="none", control_mode="pd_ee_pose")
+            env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
+            demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        ep = record_episode(env, seed, draw_closure(env.calibration_card, seed), planner)
-        problems = screen(ep)
-        if not problems:
-            write_episode(ep, demo_set.episode_file(task_id, seed))
+        problems, ep = record_demo(env, seed, demo_set.episode_file(task_id, seed), planner)
         line = json.loads(episode_json_line(ep, problems))
         line["wall_s"] = round(time.perf_counter() - t0, 2)
         append_jsonl(demo_set.qc_log(task_id), line)
@@ -63,26 +95,38 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
 
 
 def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
-    from .data.trajectory import merge
-    from .tasks import constants as C
+    """Pack the task's accepted episodes into ``task<k>.h5`` + ``.json`` with ManiSkill's
+    ``merge_trajectories`` (written under temporary names, then renamed)."""
+    import os
+
+    from mani_skill.trajectory.merge_trajectory import merge_trajectories
+
+    from .data.record import episode_paths, quiet_maniskill_logger
 
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.read_qc(task_id)}
     accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
     if accepted:
-        merge(accepted, demo_set.trajectory(task_id), get_suite(suite).env_id, {"task_id": task_id, "obs_mode": "none",
-              "control_mode": "pd_ee_pose"}, "pd_ee_pose", C.MAX_EPISODE_STEPS)
+        final_h5, final_json = episode_paths(demo_set.trajectory(task_id))
+        tmp_h5, tmp_json = episode_paths(final_h5.with_name(f"{final_h5.stem}.partial.h5"))
+        with quiet_maniskill_logger():  # it logs every file it merges; the command prints its own progress
+            merge_trajectories(str(tmp_h5), [str(p) for p in accepted])
+        os.replace(tmp_json, final_json)
+        os.replace(tmp_h5, final_h5)
     rejected = {s: qc[s]["problems"] for s in seeds if s in qc and not qc[s]["accepted"]}
     return {"task_id": task_id, "generated": sum(s in qc for s in seeds), "accepted": len(accepted), "rejected": rejected,
             "seconds_per_demo": float(np.mean([qc[s]["wall_s"] for s in seeds if s in qc])) if qc else None}
 
 
 def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1,
-             ray_address: str | None = None, planner: str | None = None) -> dict:
+             ray_address: str | None = None, planner: str | None = None, control_mode: str = "pd_ee_pose") -> dict:
     """Record ``num`` expert demos per task, one work item per task (local processes or Ray tasks).
 
     ``planner`` ("mplib" or "cartesian", default :data:`~mani_skill_softvt.expert.pick_place.DEFAULT_PLANNER`)
     joins the expert's waypoints; each episode records the planner that produced it.
+    ``control_mode``: the recorded actions, ``pd_ee_pose`` (the paper's, what the baselines train
+    on) or ``pd_joint_pos`` (ManiSkill's motion-planning format, which ``replay -c`` converts into
+    every other mode).
 
     With ``ray_address`` the tasks write their episodes on the Ray worker's node, so on a
     multi-node cluster ``out`` must be on a shared filesystem.
@@ -96,18 +140,23 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     planner = planner or DEFAULT_PLANNER
     demo_set = DemoSet(out, suite)
     if demo_set.manifest.exists():  # resuming: the new episodes must come from the same physics
-        stale = signature_mismatch(read_json(demo_set.manifest).get("physics"))
+        recorded = read_json(demo_set.manifest)
+        stale = signature_mismatch(recorded.get("physics"))
+        if recorded.get("control_mode", "pd_ee_pose") != control_mode:
+            raise ValueError(f"{demo_set.manifest}: the demos there record {recorded.get('control_mode', 'pd_ee_pose')} "
+                             f"actions, not {control_mode}; generate into another --out (or convert them with "
+                             f"python -m mani_skill_softvt.replay -c {control_mode})")
         if stale:
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
     atomic_write_json(demo_set.manifest, {
-        "suite": suite, "expert_planner": planner, "physics": physics_signature(), "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
+        "suite": suite, "expert_planner": planner, "control_mode": control_mode, "physics": physics_signature(), "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
         "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
         "note": "training and evaluation seed ranges are disjoint by construction"})
     bar = tqdm(total=len(tasks) * num, desc=f"demos {suite}", unit="demo")
     results = []
     out_abs = Path(out).resolve()  # workers (Ray's above all) need not share our working directory
-    for kind, value in run_tasks(_generate_task, [(suite, t, num, out_abs, planner) for t in tasks], workers,
+    for kind, value in run_tasks(_generate_task, [(suite, t, num, out_abs, planner, control_mode) for t in tasks], workers,
                                  ray_address):
         if kind == "message":
             bar.update(value)
@@ -263,6 +312,10 @@ def main(argv=None):
     g.add_argument("--out", type=Path, default=DEMOS_DIR)
     g.add_argument("--planner", choices=("mplib", "cartesian"), default=None,
                    help="how the expert joins its waypoints (default: mplib motion planning)")
+    g.add_argument("--control-mode", default="pd_ee_pose",
+                   choices=("pd_ee_pose", "pd_ee_pose_binary", "pd_joint_pos", "pd_joint_pos_binary"),
+                   help="recorded actions: the paper's pd_ee_pose (default) or ManiSkill's pd_joint_pos "
+                        "(python -m mani_skill_softvt.replay -c converts it into any other mode)")
     r = sub.add_parser("render", help="re-render stored demos into observations (e.g. rgb+tactile)")
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
@@ -288,7 +341,7 @@ def main(argv=None):
         if args.num < 1 or args.workers < 1:
             ap.error("--num and --workers must be >= 1")
         report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
-                          planner=args.planner)
+                          planner=args.planner, control_mode=args.control_mode)
         for r in report["tasks"]:
             print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
                   + (f", rejected: {r['rejected']}" if r["rejected"] else ""))

@@ -122,6 +122,7 @@ def main(argv=None) -> dict:
 
     from mani_skill.trajectory.merge_trajectory import merge_trajectories
 
+    from .data.record import quiet_maniskill_logger
     from .parallel import run_tasks
 
     args = parse_args(argv)
@@ -150,7 +151,8 @@ def main(argv=None) -> dict:
             else:
                 paths.append(value)
     if procs > 1:
-        merge_trajectories(str(out), sorted(paths))
+        with quiet_maniskill_logger():
+            merge_trajectories(str(out), sorted(paths))
         for p in paths:
             os.remove(p)
             os.remove(p.replace(".h5", ".json"))

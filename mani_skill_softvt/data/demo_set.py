@@ -2,8 +2,9 @@
 
 ::
 
-    <root>/<suite>/manifest.json               seed ranges (training, ID evaluation) and the expert's planner
-    <root>/<suite>/task<k>/ep_<seed>.h5        one recorded episode (written as it finishes: resume)
+    <root>/<suite>/manifest.json               seed ranges (training, ID evaluation), the expert's planner, the
+                                               recorded control mode, the physics signature
+    <root>/<suite>/task<k>/ep_<seed>.h5/.json  one accepted episode, ManiSkill's format (written as it finishes: resume)
     <root>/<suite>/task<k>/qc.jsonl            the screening verdict of every generated episode
     <root>/<suite>/task<k>.h5 / .json          accepted episodes in ManiSkill's trajectory format
     <root>/<suite>/task<k>_<obs_mode>.h5       the same episodes re-rendered into observations

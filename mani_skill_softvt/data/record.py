@@ -7,9 +7,11 @@
 - ``traj_<i>/evaluator/``: what scores the episode and never enters an observation: the
   instructed object's FEM nodes (T+1, N, 3), every object's centroid (T+1, K, 3), D_t and R_t
   (T+1), grasp, drop and pad-force events (T), and tau_o (all float32/float64/bool arrays);
-- in the episode's json entry: ``instruction``, ``target_instance``, ``r_max`` and whatever the
-  episode's producer put in :attr:`SoftVTRecordEpisode.episode_metadata` (the expert: ``closure``,
-  ``planner``).
+- ``traj_<i>/actions_binary`` (continuous-gripper modes): the actions with the gripper as the
+  binary command (closure > 0 is "close");
+- in the episode's json entry and as the group's attributes: ``instruction``, ``target_instance``
+  and whatever the episode's producer put in :attr:`SoftVTRecordEpisode.episode_metadata` (the
+  expert: ``closure``, ``planner``); the json also gets ``r_max``, the group ``seed``.
 
 ``env_info.env_id`` is written as ``mani_skill_softvt:<env id>``: gymnasium imports the module
 named before the colon, so ManiSkill's own tools (``python -m mani_skill.trajectory.replay_trajectory``,
@@ -21,6 +23,8 @@ env records D_t only.
 
 from __future__ import annotations
 
+import logging
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +98,18 @@ class SoftVTRecordEpisode(RecordEpisode):
             g.create_dataset(k, data=v, **({"compression": "gzip", "compression_opts": 4} if v.size > 4096 else {}))
         if tau_o is not None:
             g.create_dataset("tau_o", data=np.float64(tau_o))
-        episode.update(instruction=u.instruction, target_instance=u.target_instance, **self.episode_metadata)
+        if not u.control_mode.endswith("_binary"):
+            # The same actions in the binary gripper encoding (any commanded closure is "close"),
+            # what the paper's binary-gripper variants train on.
+            actions = group["actions"][()]
+            binary = actions.copy()
+            binary[:, -1] = (actions[:, -1] > 0.0).astype(actions.dtype)
+            group.create_dataset("actions_binary", data=binary)
+        meta = dict(seed=int(episode["episode_seed"]), instruction=u.instruction, target_instance=u.target_instance,
+                    **self.episode_metadata)
+        group.attrs.update(meta)  # also on the group: a reader of one h5 needs no json
+        meta.pop("seed")
+        episode.update(meta)
         if "deformation_ratio" in ev:
             episode["r_max"] = float(ev["deformation_ratio"].max())
 
@@ -122,6 +137,19 @@ class _NoClose:
 
     def __getattr__(self, name):
         return getattr(self._env, name)
+
+
+@contextmanager
+def quiet_maniskill_logger(level=logging.WARNING):
+    """ManiSkill's logger above INFO for a block (its tools log every file they touch)."""
+    from mani_skill.utils.logging_utils import logger
+
+    old = logger.level
+    logger.setLevel(level)
+    try:
+        yield
+    finally:
+        logger.setLevel(old)
 
 
 def episode_paths(h5_path: Path) -> tuple[Path, Path]:

@@ -1,12 +1,14 @@
-"""Expert demonstrations in ManiSkill's trajectory format (.h5 + .json), with quality control.
+"""Expert demonstrations in ManiSkill's trajectory format (.h5 + .json): reading, screening, rendering.
 
-Each episode is recorded once (physics runs once) into its own small HDF5 file, written
-atomically, so generation resumes per episode; ``merge`` then packs the accepted episodes into
-one ManiSkill trajectory file. Per episode ``traj_<i>`` holds ManiSkill's ``actions``,
-``terminated``, ``truncated``, ``success``, ``fail`` and ``env_states`` (including the FEM state,
-so ``set_state_dict`` replays it exactly), plus ``actions_binary`` (the same actions in the binary
-gripper encoding) and an ``evaluator/`` group (FEM nodes, object centroids, D_t, R_t, grasp,
-contact and drop events) that never enters any observation.
+Episodes are recorded by ManiSkill's ``RecordEpisode`` with SoftVT's evaluator stream beside the
+observations (:class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`), one small file per
+episode (``demos generate`` resumes per episode), then merged per task with ManiSkill's
+``merge_trajectories``. Per episode ``traj_<i>`` holds ManiSkill's ``actions``, ``terminated``,
+``truncated``, ``success``, ``fail``, ``env_states`` (including the FEM state, so
+``set_state_dict`` replays it exactly), ``actions_binary`` (the same actions in the binary
+gripper encoding), an ``evaluator/`` group (FEM nodes, object centroids, D_t, R_t, grasp,
+contact and drop events) that never enters any observation, and the episode's ``seed``,
+``closure``, ``instruction``, ``target_instance`` and ``planner`` as attributes (also in the json).
 """
 
 from __future__ import annotations
@@ -19,19 +21,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..expert.pick_place import DEFAULT_PLANNER
-from ..fileio import atomic_write, atomic_write_json
+from ..fileio import atomic_write
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
-_CLOSURE_DESC = "closure drawn from the calibrated envelope [g_min, g_max]"
-SOURCE_DESCS = {
-    "mplib": ("mani_skill_softvt scripted expert: mplib joint-space motion planning (screw paths, RRTConnect opt-in, "
-              "TOPP-RA at 20 Hz) around the table, target prop and other instance, replayed as absolute "
-              f"end-effector poses (forward kinematics), {_CLOSURE_DESC}"),
-    "cartesian": ("mani_skill_softvt scripted expert: Cartesian waypoints through the absolute end-effector pose "
-                  f"controller, {_CLOSURE_DESC}"),
-}
-SOURCE_DESC = SOURCE_DESCS[DEFAULT_PLANNER]
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
 
 
@@ -73,15 +65,6 @@ def check_h5(path: Path, read: bool = True) -> str | None:
     return None
 
 
-def source_desc(planners) -> str:
-    """ManiSkill ``source_desc`` of a trajectory file whose episodes came from ``planners``."""
-    planners = sorted(set(planners))
-    if len(planners) == 1:
-        return SOURCE_DESCS[planners[0]]
-    return "mani_skill_softvt scripted expert, mixed planners: " + "; ".join(
-        f"{p}: {SOURCE_DESCS[p]}" for p in planners)
-
-
 def flatten_batch(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
     """Env state or observation (nested dicts, batch of one) as ``{"a/b": array}`` without the batch
     axis; strings (the instruction) are left out: a trajectory stores its instruction once. The
@@ -94,53 +77,6 @@ def flatten_batch(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
         elif not isinstance(v, str):
             out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
     return out
-
-
-def record_episode(env, seed: int, closure: float, planner: str = DEFAULT_PLANNER) -> dict:
-    """Run the expert once on a DSR-wrapped suite env; return every stream as numpy arrays."""
-    from ..expert.pick_place import expert_actions, plan_pick_place
-
-    obs, info = env.reset(seed=seed)
-    u = env.unwrapped
-    name = u.target_instance
-    states = [flatten_batch(u.get_state_dict())]
-    ev = {"nodes": [u.soft_nodes(name).astype(np.float32)],
-          "centroids": [np.stack([u.soft_nodes(n).mean(0) for n in u.object_names])],
-          "deformation": [env.deformation_trace[-1]], "deformation_ratio": [info["deformation_ratio"]]}
-    acts, terms, truncs, succ, fail, grasp, drop, force = [], [], [], [], [], [], [], []
-    plan = plan_pick_place(env, closure, planner)  # plan.planner: the planner actually used (mplib falls back)
-    for _, action in expert_actions(env, plan):
-        obs, _, terminated, truncated, info = env.step(action)
-        acts.append(action)
-        terms.append(bool(terminated[0]))
-        truncs.append(bool(truncated[0]))
-        succ.append(bool(info["success"][0]))
-        fail.append(bool(info["fail"][0]))
-        grasp.append(bool(info["is_grasped"][0]))
-        drop.append(bool(info["dropped"][0]))
-        pads = u.pad_forces()
-        force.append([pads["left"], pads["right"]])
-        states.append(flatten_batch(u.get_state_dict()))
-        ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
-        ev["centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
-        ev["deformation"].append(env.deformation_trace[-1])
-        ev["deformation_ratio"].append(info["deformation_ratio"])
-        if terms[-1] or truncs[-1]:
-            break
-    actions = np.asarray(acts, np.float32)
-    binary = actions.copy()
-    binary[:, 6] = (actions[:, 6] > 0.0).astype(np.float32)  # any commanded closure = "close"
-    return {
-        "seed": int(seed), "closure": float(closure), "instruction": u.instruction, "target_instance": name,
-        "planner": plan.planner,
-        "actions": actions, "actions_binary": binary, "terminated": np.asarray(terms), "truncated": np.asarray(truncs),
-        "success": np.asarray(succ), "fail": np.asarray(fail),
-        "env_states": {k: np.stack([s[k] for s in states]) for k in states[0]},
-        "evaluator": {"nodes": np.stack(ev["nodes"]), "object_centroids": np.stack(ev["centroids"]),
-                      "deformation": np.asarray(ev["deformation"]), "deformation_ratio": np.asarray(ev["deformation_ratio"]),
-                      "is_grasped": np.asarray(grasp), "dropped": np.asarray(drop), "pad_force": np.asarray(force),
-                      "tau_o": np.float64(env.tau_o)},
-    }
 
 
 def screen(ep: dict) -> list[str]:
@@ -171,14 +107,6 @@ def screen(ep: dict) -> list[str]:
     return problems
 
 
-def write_episode(ep: dict, path: Path) -> None:
-    """One episode's HDF5 (atomically)."""
-    def write(tmp: Path):
-        with h5py.File(tmp, "w") as f:
-            _write_traj(f.create_group("traj"), ep)
-    atomic_write(path, write)
-
-
 def _dataset(group, key: str, data) -> None:
     data = np.asarray(data)
     # Large per-step arrays (FEM nodes, states) compress well; gzip is lossless and deterministic.
@@ -186,54 +114,26 @@ def _dataset(group, key: str, data) -> None:
     group.create_dataset(key, data=data, **opts)
 
 
-def _write_traj(g, ep: dict) -> None:
-    for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail"):
-        _dataset(g, k, ep[k])
-    s = g.create_group("env_states")
-    for k, v in ep["env_states"].items():
-        _dataset(s, k, v)
-    e = g.create_group("evaluator")
-    for k, v in ep["evaluator"].items():
-        _dataset(e, k, v)
-    for k in ("seed", "closure", "instruction", "target_instance"):
-        g.attrs[k] = ep[k]
-    g.attrs["planner"] = ep["planner"]
-
-
-def read_episode(path: Path) -> dict:
+def read_episode(path: Path, traj: str = "traj_0") -> dict:
+    """One recorded episode (``traj`` of a trajectory file) as numpy arrays and its attributes."""
     with open_h5(path) as f:
-        g = f["traj"]
+        if traj not in f:
+            raise CorruptDataError(f"{path} holds no episode '{traj}' (it has {sorted(f.keys())}): it was written "
+                                   f"by an older version or another tool; {REGENERATE}")
+        g = f[traj]
         ep = {k: g[k][()] for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail")}
         ep["env_states"] = {}
         g["env_states"].visititems(lambda k, v: ep["env_states"].__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
         ep["evaluator"] = {k: g["evaluator"][k][()] for k in g["evaluator"]}
-        ep.update({k: (v.decode() if isinstance(v, bytes) else v) for k, v in g.attrs.items()})
+        ep.update({k: _attr_value(v) for k, v in g.attrs.items()})
     return ep
 
 
-def merge(episode_files: list[Path], out_h5: Path, env_id: str, env_kwargs: dict, control_mode: str,
-          max_episode_steps: int) -> dict:
-    """Pack episodes into ``out_h5`` + its ManiSkill ``.json`` (source_type motionplanning)."""
-    meta = {"env_info": {"env_id": env_id, "env_kwargs": env_kwargs, "max_episode_steps": max_episode_steps},
-            "source_type": "motionplanning", "source_desc": SOURCE_DESC, "episodes": []}
-    planners = []
-
-    def write(tmp: Path):
-        with h5py.File(tmp, "w") as f:
-            for i, path in enumerate(episode_files):
-                ep = read_episode(path)
-                planners.append(ep["planner"])
-                _write_traj(f.create_group(f"traj_{i}"), ep)
-                meta["episodes"].append({
-                    "episode_id": i, "episode_seed": int(ep["seed"]), "reset_kwargs": {"seed": int(ep["seed"])},
-                    "control_mode": control_mode, "elapsed_steps": int(len(ep["actions"])),
-                    "success": bool(ep["success"][-1]), "instruction": ep["instruction"], "closure": float(ep["closure"]),
-                    "r_max": float(np.max(ep["evaluator"]["deformation_ratio"])), "planner": planners[-1],
-                })
-            meta["source_desc"] = source_desc(planners) if planners else SOURCE_DESC
-    atomic_write(out_h5, write)
-    atomic_write_json(out_h5.with_suffix(".json"), meta)
-    return meta
+def _attr_value(v):
+    """An HDF5 attribute as a plain Python value (text decoded, numpy scalars unwrapped)."""
+    if isinstance(v, bytes):
+        return v.decode()
+    return v.item() if isinstance(v, np.generic) else v
 
 
 def episode_json_line(ep: dict, problems: list[str]) -> str:
