@@ -18,7 +18,7 @@ replays them too; this entry adds what ManiSkill's converter cannot know (``-c``
   ManiSkill's converter writes XYZ Euler angles. Each step's target is the TCP pose of the
   recorded joint target (forward kinematics), as ManiSkill's converter aims at the target and
   not at the lagging arm;
-- into any ``*_binary`` mode: a recorded closure g in [0, 1] becomes "close" (1) when g > 0, else
+- into any ``*_binary`` mode (``pd_joint_pos_binary`` included, which ManiSkill does not convert to): a recorded closure g in [0, 1] becomes "close" (1) when g > 0, else
   "open" (0); ManiSkill would copy g, and a calibrated closure below 0.5 would read as "open".
 """
 
@@ -80,6 +80,20 @@ def joint_pos_to_ee_pose(output_mode, ori_actions, ori_env, env, render=False, p
     return info
 
 
+def replay_actions(actions, env, render=False, pbar=None) -> dict:
+    """Step ``env`` through ``actions`` as they are (a mode whose arm action is the recorded one)."""
+    info = {}
+    if pbar is not None:
+        pbar.reset(total=len(actions))
+    for a in np.asarray(actions, np.float32):
+        _, _, _, _, info = env.step(a)
+        if pbar is not None:
+            pbar.update()
+        if render:
+            env.unwrapped.render_human()
+    return info
+
+
 def _patch_conversion(replay_trajectory) -> None:
     """Route ``-c`` conversions from ``pd_joint_pos`` that need SoftVT's conventions (module docstring)."""
     original = replay_trajectory.action_conversion.from_pd_joint_pos
@@ -88,6 +102,8 @@ def _patch_conversion(replay_trajectory) -> None:
         if output_mode.endswith("_binary"):
             env = _BinaryGripperEnv(env)
         arm_mode = output_mode.removesuffix("_binary")
+        if arm_mode == "pd_joint_pos":  # only the gripper's encoding changes
+            return replay_actions(ori_actions, env, render, pbar)
         if arm_mode == "pd_ee_pose":
             return joint_pos_to_ee_pose(arm_mode, ori_actions, ori_env, env, render, pbar, verbose)
         return original(arm_mode, ori_actions, ori_env, env, render=render, pbar=pbar, verbose=verbose)

@@ -7,7 +7,7 @@ The counterpart of :class:`mani_skill_softvt.evaluation.remote.WebsocketPolicy` 
 and the observation schema are documented there): the policy runs in this process, e.g. on a GPU
 machine, while the evaluator steps the env elsewhere. On connect the server sends its metadata;
 each request is turned back into the observation dict the env produces (``agent/qpos``,
-``extra/tcp_pose``, both cameras, tactile when sent, ``instruction``; as batched torch tensors),
+``extra/tcp_pose``, both cameras, tactile when sent; as batched torch tensors; the instruction goes to ``reset``),
 so the policy computes bit for bit the actions it computes in process. ``episode/reset`` (and the
 first request of a connection) calls ``reset(prompt, episode/seed)``. A policy exception is
 answered with its traceback (a string, openpi's convention) and the server keeps serving.
@@ -49,8 +49,7 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
     instruction = str(request["prompt"])
     obs = {"agent": {"qpos": _batched(request["observation/qpos"], np.float32)},
            "extra": {"tcp_pose": _batched(request["observation/tcp_pose_world"], np.float32)},
-           "sensor_data": {cam: {"rgb": _batched(request[key], np.uint8)} for key, cam in CAMERAS.items()},
-           "instruction": instruction}
+           "sensor_data": {cam: {"rgb": _batched(request[key], np.uint8)} for key, cam in CAMERAS.items()}}
     if f"observation/tactile_{TACTILE_SIDES[0]}" in request:
         obs["tactile"] = {side: {"rgb": _batched(request[f"observation/tactile_{side}"], np.uint8),
                                  **{env_key: _batched(request[f"observation/tactile_{side}_{name}"], np.float32)

@@ -231,8 +231,7 @@ def _env_obs(rng, tactile: bool) -> dict:
            "extra": {"tcp_pose": torch.from_numpy(np.r_[0.0, 0.0, 0.2, down_quat(0.0)][None].astype(np.float32)),
                      "gripper_width": torch.full((1, 1), 0.08)},
            "sensor_data": {c: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 224, 224, 3), dtype=np.uint8))}
-                           for c in ("base_camera", "hand_camera")},
-           "instruction": "pick"}
+                           for c in ("base_camera", "hand_camera")}}
     if tactile:
         obs["tactile"] = {s: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 240, 320, 3), dtype=np.uint8)),
                               "depth": torch.zeros(1, 240, 320, dtype=torch.int16),

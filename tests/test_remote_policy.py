@@ -40,8 +40,7 @@ def _obs(tactile: bool, seed: int = 0) -> dict:
                      "qvel": torch.zeros(1, 9)},
            "extra": {"tcp_pose": torch.from_numpy(tcp[None]), "gripper_width": torch.zeros(1, 1)},
            "sensor_data": {c: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 224, 224, 3), dtype=np.uint8))}
-                           for c in ("base_camera", "hand_camera")},
-           "instruction": "put the soft cube in the basket"}
+                           for c in ("base_camera", "hand_camera")}}
     if tactile:
         obs["tactile"] = {s: {"rgb": torch.from_numpy(rng.integers(0, 256, (1, 240, 320, 3), dtype=np.uint8)),
                               "depth": torch.from_numpy(rng.integers(0, 2000, (1, 240, 320), dtype=np.int16)),
