@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..paths import ASSETS_DIR
+from ..paths import ASSETS_DIR, writable_default
 from .cards import ASSET_IDS, PROP_NAMES, read_obj, twin_id
 from .materials import MATERIALS, PROP_FRICTION, TWIN_MAX_CONVEX_PARTS
 from .shapes import object_parts
@@ -297,23 +297,29 @@ def build_prop(name: str, out: Path) -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.assets.build", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=ASSETS_DIR)
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"output directory (default {ASSETS_DIR}: $SOFTVT_ASSETS_DIR, else the checkout's assets/; "
+                         "needed when the package is installed)")
     ap.add_argument("--only", nargs="*", help="asset ids or prop names to build (default: all)")
     ap.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION)
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
+    try:
+        out = args.out if args.out is not None else writable_default(ASSETS_DIR, "--out", "SOFTVT_ASSETS_DIR")
+    except ValueError as e:
+        ap.error(str(e))
     names = args.only or (ASSET_IDS + PROP_NAMES)
     unknown = [n for n in names if n not in ASSET_IDS and n not in PROP_NAMES]
     if unknown:
         ap.error(f"unknown names {unknown}; objects: {ASSET_IDS}; props: {PROP_NAMES}")
     for name in tqdm(names, desc="building assets"):
         if name in ASSET_IDS:
-            c = build_object(name, args.out, args.resolution)
+            c = build_object(name, out, args.resolution)
             tqdm.write(f"{name:<22} {c['mass'] * 1e3:6.1f} g  {c['counts']['tet_nodes']:4d} nodes "
                        f"{c['counts']['tets']:5d} tets  dims {[round(x * 1e3) for x in c['dimensions']]} mm")
         else:
-            c = build_prop(name, args.out)
+            c = build_prop(name, out)
             tqdm.write(f"{name:<22} {len(c['files']['collision'])} convex parts")
 
 
