@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .assets.cards import ASSET_IDS
 from .calibration import protocol as P
-from .paths import CALIBRATION_DIR
+from .paths import CALIBRATION_DIR, writable_default
 
 QUICK_ASSET = "soft_stw_cube_hq"
 QUICK_CLOSURES = (0.3, 0.5, 0.7, 0.9)
@@ -60,15 +60,21 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--closures", type=float, nargs="+", default=None, help="closures to sweep (default: 0.10 to 1.0 by 0.05)")
     ap.add_argument("--percentile", type=float, default=P.PERCENTILE)
     ap.add_argument("--quick", action="store_true", help="one asset, four closures, one repeat (smoke test)")
-    ap.add_argument("--out", type=Path, default=CALIBRATION_DIR)
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"cards, plots and sweep logs (default {CALIBRATION_DIR}: $SOFTVT_CALIBRATION_DIR, else the "
+                         "checkout's calibration/; needed to calibrate when the package is installed)")
     ap.add_argument("--restart", action="store_true",
                     help="set the assets' sweep logs aside (.sweeps/replaced/) and sweep from scratch, e.g. after "
                          "the physics changed; without it an interrupted run resumes")
     ap.add_argument("--table", action="store_true", help="print the cards in --out beside the paper's, then exit")
     args = ap.parse_args(argv)
-    if args.table:
-        print(comparison_table(args.out))
+    if args.table:  # reads only: the installed cards will do
+        print(comparison_table(args.out if args.out is not None else CALIBRATION_DIR))
         return []
+    try:
+        args.out = args.out if args.out is not None else writable_default(CALIBRATION_DIR, "--out", "SOFTVT_CALIBRATION_DIR")
+    except ValueError as e:
+        ap.error(str(e))
 
     assets = args.assets or ([QUICK_ASSET] if args.quick else list(ASSET_IDS))
     unknown = [a for a in assets if a not in ASSET_IDS]

@@ -27,7 +27,7 @@ import numpy as np
 from .data.demo_set import DemoSet
 from .fileio import append_jsonl, atomic_write_json, read_json
 from .parallel import run_tasks
-from .paths import DEMOS_DIR
+from .paths import DEMOS_DIR, writable_default
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
@@ -298,6 +298,10 @@ def _image_size(text: str) -> tuple[int, int] | None:
     return h, w
 
 
+_OUT_HELP = (f"demos directory, generate + render output (default {DEMOS_DIR}: $SOFTVT_DEMOS_DIR, else the "
+             "checkout's demos/; needed to generate or render when the package is installed)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.demos", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -309,7 +313,7 @@ def main(argv=None):
     g.add_argument("--workers", type=int, default=1)
     g.add_argument("--ray", metavar="ADDRESS", default=None,
                    help="run the tasks on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
-    g.add_argument("--out", type=Path, default=DEMOS_DIR)
+    g.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     g.add_argument("--planner", choices=("mplib", "cartesian"), default=None,
                    help="how the expert joins its waypoints (default: mplib motion planning)")
     g.add_argument("--control-mode", default="pd_ee_pose",
@@ -321,14 +325,14 @@ def main(argv=None):
     r.add_argument("--tasks", nargs="+", default=["all"])
     r.add_argument("--obs-mode", default="rgb+tactile")
     r.add_argument("--workers", type=int, default=1, help="tasks rendered in parallel processes")
-    r.add_argument("--out", type=Path, default=DEMOS_DIR)
+    r.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     s = sub.add_parser("stats", help="per-task statistics of generated demos")
     s.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
-    s.add_argument("--out", type=Path, default=DEMOS_DIR)
+    s.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     e = sub.add_parser("export-lerobot", help="export rendered demos to LeRobot's dataset v3.0 layout (parquet + mp4)")
     e.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     e.add_argument("--tasks", nargs="+", default=["all"], help="'all': every task with demos under --out")
-    e.add_argument("--out", type=Path, default=DEMOS_DIR, help="demos directory (generate + render output)")
+    e.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     e.add_argument("--lerobot-out", type=Path, required=True, help="new (empty) directory for the LeRobot dataset")
     e.add_argument("--obs-mode", default="rgb+tactile", help="which rendering to export (as passed to render)")
     e.add_argument("--image-size", default="224x224", metavar="HxW",
@@ -336,6 +340,13 @@ def main(argv=None):
                         "needs one shape for all image inputs; 'native' keeps each stream's size (tactile 240x320)")
     e.add_argument("--no-video", action="store_true", help="omit the image features (no mp4), e.g. for a tiny sample")
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = DEMOS_DIR
+        if args.cmd in ("generate", "render"):  # they write there: never by default into an installed package
+            try:
+                writable_default(DEMOS_DIR, "--out", "SOFTVT_DEMOS_DIR")
+            except ValueError as err:
+                ap.error(str(err))
     if args.cmd == "generate":
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         if args.num < 1 or args.workers < 1:

@@ -5,6 +5,11 @@
 #      no rendering device). The backports suite uses the mirror URI the machine's own Debian
 #      sources already use.
 #   2. A virtual environment in .venv with torch 2.13.0 (CPU) installed first, then the package.
+#      SOFTVT_TORCH_INDEX_URL: the index torch comes from. Unset, pip's own configuration decides
+#      (on this project's machines a local CPU wheel); on a machine whose default is PyPI's
+#      multi-GB CUDA build (Linux x86_64), point it at PyTorch's CPU wheel index:
+#        SOFTVT_TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu bash scripts/setup.sh
+#      Set it for the first run: pip keeps a torch 2.13.0 already in the venv, whatever its build.
 #   3. Warm the Warp kernel cache so the first episode does not pay ~40 s of compilation.
 # Idempotent: a second run checks each step and skips it.
 set -euo pipefail
@@ -49,7 +54,12 @@ else
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   # CPU torch first: otherwise mani-skill's torch requirement pulls a CUDA build.
-  "$VENV/bin/python" -m pip install -q torch==2.13.0
+  if [ -n "${SOFTVT_TORCH_INDEX_URL:-}" ]; then
+    log "torch from $SOFTVT_TORCH_INDEX_URL"
+    "$VENV/bin/python" -m pip install -q torch==2.13.0 --index-url "$SOFTVT_TORCH_INDEX_URL"
+  else
+    "$VENV/bin/python" -m pip install -q torch==2.13.0
+  fi
   "$VENV/bin/python" -m pip install -q -e ".[dev]"
   echo "$want" > "$stamp"
   log "installed the package into $VENV"

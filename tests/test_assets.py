@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from mani_skill_softvt.assets import ASSET_IDS, PROP_NAMES, TWIN_IDS, load_card, load_prop
-from mani_skill_softvt.assets.build import build_object, build_prop, stable_rest_pose
+from mani_skill_softvt.assets.build import build_object, build_prop, pick_rest_face, stable_rest_pose
 from mani_skill_softvt.assets.cards import read_obj
 from mani_skill_softvt.assets.tetmesh import box_tetmesh, surface_of_tets, tet_quality, tet_signed_volumes
 from mani_skill_softvt.paths import ASSETS_DIR
@@ -116,6 +116,55 @@ def test_rest_pose_tilts_a_body_back_onto_its_face_without_turning_it(tilt_deg):
     placed = rest.apply(tilted.apply(box.vertices)) + pose[:3]
     assert placed[:, 2].min() == pytest.approx(0.0, abs=1e-9)
     assert np.allclose(placed[:, :2].mean(axis=0), 0.0, atol=1e-9)
+
+
+def _v_bottomed_prism(tilt_deg=5.0, length=0.06, width=0.04, height=0.03):
+    """A prism along x whose bottom is a roof upside down: two faces tilted +-tilt about the ridge
+    (x axis), mirror images of each other, both stable and equally likely."""
+    t = np.tan(np.deg2rad(tilt_deg))
+    hx, hy = length / 2, width / 2
+    section = [(0.0, 0.0), (hy, hy * t), (hy, height), (-hy, height), (-hy, hy * t)]  # (y, z)
+    points = np.array([(x, y, z) for x in (-hx, hx) for y, z in section])
+    hull = trimesh.convex.convex_hull(points)
+    return np.asarray(hull.vertices), np.asarray(hull.faces)
+
+
+def test_rest_pose_of_mirror_faces_does_not_depend_on_float_noise():
+    # Two mirror-image faces tie on probability and tilt; trimesh lists them in qhull's order and
+    # noise far below the OBJ precision decides their tilts' last digits. The tie must be broken
+    # by the geometry (smallest n_y: the -y face), the same pose whatever the noise.
+    from scipy.spatial.transform import Rotation
+
+    v, f = _v_bottomed_prism()
+    ref = stable_rest_pose([(v, f)])
+    w, x, y, z = ref[3:]
+    rotvec = Rotation.from_quat([x, y, z, w]).as_rotvec()
+    # Tipped by +5 deg about x onto its -y face (onto the +y face it would be -5 deg).
+    assert rotvec == pytest.approx([np.deg2rad(5.0), 0.0, 0.0], abs=1e-9)
+    for scale in (1e-12, 1e-11, 1e-10, 1e-9):
+        for seed in range(4):
+            noise = np.random.default_rng(seed).uniform(-scale, scale, v.shape)
+            pose = stable_rest_pose([(v + noise, f)])
+            # 1e-9 m of noise on a 4 cm face turns it by ~1e-7 rad; the mirror face is 0.17 rad away.
+            assert np.allclose(pose, ref, atol=1e-6), f"noise {scale:g}, seed {seed}: {pose} != {ref}"
+
+
+def test_pick_rest_face_breaks_ties_by_the_normal_not_the_order():
+    n = np.array([[0.03, -0.02, -0.9994], [-0.03, -0.02, -0.9994], [0.03, 0.02, -0.9994], [0.02, -0.03, -0.9994]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    tilt = np.arccos(-n[:, 2])
+    for order in ([0, 1, 2, 3], [3, 2, 1, 0], [1, 3, 0, 2]):
+        # Equal within noise: smallest n_y (face 3), whatever order trimesh lists them in.
+        noise = np.random.default_rng(order[0]).uniform(-1e-12, 1e-12, 4)
+        i = pick_rest_face(n[order], tilt[order] + noise, np.full(4, 0.1) + noise)
+        assert order[i] == 3
+    # A real difference in probability (1e-6, as pastry001's two best faces) still decides first,
+    # then a real difference in tilt.
+    assert pick_rest_face(n, tilt, np.array([0.1, 0.1 + 1e-6, 0.1, 0.1])) == 1
+    assert pick_rest_face(n, tilt + np.array([0.0, 0.0, -1e-3, 0.0]), np.full(4, 0.1)) == 2
+    # Beyond REST_POSE_MAX_TILT only when no face is nearer.
+    steep = np.array([[0.0, -0.5, -0.866], [0.0, 0.05, -0.9987]])
+    assert pick_rest_face(steep, np.arccos(-steep[:, 2]), np.array([0.9, 0.1])) == 1
 
 
 @pytest.mark.parametrize("twin", TWIN_IDS)

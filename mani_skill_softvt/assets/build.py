@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..paths import ASSETS_DIR
+from ..paths import ASSETS_DIR, writable_default
 from .cards import ASSET_IDS, PROP_NAMES, read_obj, twin_id
 from .materials import MATERIALS, PROP_FRICTION, TWIN_MAX_CONVEX_PARTS
 from .shapes import object_parts
@@ -29,6 +29,14 @@ from .tetmesh import tet_quality, tetrahedralize
 
 DEFAULT_RESOLUTION = 6  # the paper's hex resolution
 REST_POSE_MAX_TILT = np.deg2rad(25.0)  # a twin's rest pose stays this close to the modelled orientation
+# Stable faces whose probability and tilt agree within these are ties (mirror images on a symmetric
+# body): float noise (qhull's face order, 1e-9 m vertex noise) moves them by < 2e-8 and < 2e-6 rad,
+# while distinct faces differ by more (pastry001's two best by 1e-6 in probability). Within a tie the
+# normal decides, its components compared within NORMAL_TIE (noise moves them by < 1e-6; distinct
+# faces of the twins differ by > 1e-3).
+PROBABILITY_TIE = 1e-7
+TILT_TIE = 1e-5  # rad
+NORMAL_TIE = 1e-5
 DESCRIPTIONS = {
     "soft_pastry001": "white swirled pastry", "soft_pastry002": "panda-face pastry",
     "soft_pastry003": "small chocolate rectangular pastry", "soft_stw_cube_hq": "soft cream-colored cube",
@@ -137,7 +145,7 @@ def stable_rest_pose(parts) -> np.ndarray:
     projects into. Only their face normals are used: the body is tilted onto the chosen face by
     the shortest arc, so the twin keeps its soft asset's heading (trimesh's frames add a yaw built
     from the tiny horizontal part of a nearly vertical normal: arbitrary, up to 22 deg on these
-    assets, and different from machine to machine)."""
+    assets, and different from machine to machine). The face is chosen by :func:`pick_rest_face`."""
     import trimesh
     from scipy.spatial.transform import Rotation
     from trimesh.poses import compute_stable_poses
@@ -150,10 +158,7 @@ def stable_rest_pose(parts) -> np.ndarray:
     transforms, probability = compute_stable_poses(hull, center_mass=com, sigma=0.0, n_samples=1)
     normals = -transforms[:, 2, :3]  # outward normal (object frame) of the face each pose rests on
     tilt = np.arccos(np.clip(-normals[:, 2], -1.0, 1.0))
-    # The nearest pose can be marginal (a pastry tipped in PhysX from its 6 deg pose): among the
-    # poses within REST_POSE_MAX_TILT take the widest basin (trimesh's probability), then the nearest.
-    near = np.flatnonzero(tilt <= max(REST_POSE_MAX_TILT, tilt.min()))
-    i = min(near, key=lambda i: (-round(float(probability[i]), 6), tilt[i]))
+    i = pick_rest_face(normals, tilt, probability)
     rotation, _ = Rotation.align_vectors([[0.0, 0.0, -1.0]], [normals[i]])  # one pair: the shortest arc
     rotated = rotation.apply(hull.vertices)
     # Keep the object where it was in xy (its footprint's centre), bottom on the table.
@@ -161,6 +166,32 @@ def stable_rest_pose(parts) -> np.ndarray:
     rlo, rhi = rotated.min(axis=0), rotated.max(axis=0)
     p = np.array([*(0.5 * (lo + hi) - 0.5 * (rlo + rhi))[:2], -rlo[2]])
     return np.concatenate([p, xyzw_to_wxyz(rotation.as_quat())])
+
+
+def _within(candidates: np.ndarray, values: np.ndarray, tol: float) -> np.ndarray:
+    """The candidates whose value is within ``tol`` of the smallest: a tie group measured from the
+    best, so float noise cannot split an exact tie (rounding onto a fixed grid can, when the tied
+    value sits on a grid line)."""
+    v = values[candidates]
+    return candidates[v <= v.min() + tol]
+
+
+def pick_rest_face(normals: np.ndarray, tilt: np.ndarray, probability: np.ndarray) -> int:
+    """Index of the stable face a twin rests on, from trimesh's candidates (outward ``normals``,
+    ``tilt`` from the modelled orientation in rad, ``probability``). The nearest pose can be
+    marginal (a pastry tipped in PhysX from its 6 deg pose): among the faces within
+    REST_POSE_MAX_TILT take the widest basin (trimesh's probability), then the least tilt.
+    Symmetric bodies have several mirror-image faces tied on both; trimesh lists them in qhull's
+    face order, which differs from machine to machine, so a tie is broken by the normal: smallest
+    n_y, then largest n_x (of the ten twins, the order that keeps the most committed cards)."""
+    group = np.flatnonzero(tilt <= max(REST_POSE_MAX_TILT, tilt.min()))
+    group = _within(group, -probability, PROBABILITY_TIE)
+    group = _within(group, tilt, TILT_TIE)
+    group = _within(group, normals[:, 1], NORMAL_TIE)
+    group = _within(group, -normals[:, 0], NORMAL_TIE)
+    # Left: normals within NORMAL_TIE of each other (poses 1e-5 rad apart; no committed twin has
+    # two); the exact values decide.
+    return int(min(group, key=lambda i: (normals[i, 1], -normals[i, 0], normals[i, 2])))
 
 
 # ------------------------------------------------------------------------------------ props
@@ -266,23 +297,29 @@ def build_prop(name: str, out: Path) -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.assets.build", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=ASSETS_DIR)
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"output directory (default {ASSETS_DIR}: $SOFTVT_ASSETS_DIR, else the checkout's assets/; "
+                         "needed when the package is installed)")
     ap.add_argument("--only", nargs="*", help="asset ids or prop names to build (default: all)")
     ap.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION)
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
+    try:
+        out = args.out if args.out is not None else writable_default(ASSETS_DIR, "--out", "SOFTVT_ASSETS_DIR")
+    except ValueError as e:
+        ap.error(str(e))
     names = args.only or (ASSET_IDS + PROP_NAMES)
     unknown = [n for n in names if n not in ASSET_IDS and n not in PROP_NAMES]
     if unknown:
         ap.error(f"unknown names {unknown}; objects: {ASSET_IDS}; props: {PROP_NAMES}")
     for name in tqdm(names, desc="building assets"):
         if name in ASSET_IDS:
-            c = build_object(name, args.out, args.resolution)
+            c = build_object(name, out, args.resolution)
             tqdm.write(f"{name:<22} {c['mass'] * 1e3:6.1f} g  {c['counts']['tet_nodes']:4d} nodes "
                        f"{c['counts']['tets']:5d} tets  dims {[round(x * 1e3) for x in c['dimensions']]} mm")
         else:
-            c = build_prop(name, args.out)
+            c = build_prop(name, out)
             tqdm.write(f"{name:<22} {len(c['files']['collision'])} convex parts")
 
 

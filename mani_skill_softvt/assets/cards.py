@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..paths import ASSETS_DIR
+from .. import paths
+from ..paths import ASSETS_DIR, missing_data_hint
 
 ASSET_IDS = [
     "soft_pastry001", "soft_pastry002", "soft_pastry003", "soft_stw_cube_hq", "soft_pastry005",
@@ -32,7 +33,20 @@ def twin_id(soft_asset_id: str) -> str:
 TWIN_IDS = [twin_id(a) for a in ASSET_IDS]
 PROP_NAMES = ["table", "basket", "plate", "tea_tin", "mug", "apple"]
 
-_REBUILD = "rebuild the assets with: python -m mani_skill_softvt.assets.build"
+_BUILD = "python -m mani_skill_softvt.assets.build"
+
+
+def _remedy() -> str:
+    """How to repair a damaged asset file: rebuild it in a checkout; an installed package's
+    copy comes from its wheel (the builder would not write into site-packages by default)."""
+    if paths.running_from_checkout():
+        return f"rebuild the assets with: {_BUILD}"
+    return "reinstall the package (its wheel carries the assets), or set SOFTVT_ASSETS_DIR to a checkout's assets/"
+
+
+def _not_found_hint(assets_dir: Path) -> str:
+    return missing_data_hint(assets_dir, "SOFTVT_ASSETS_DIR", "assets", _BUILD)
+
 
 _OBJECT_FIELDS = {
     "asset_id": str, "twin_id": str, "kind": str, "description": str, "dimensions": list, "volume": float,
@@ -52,23 +66,23 @@ def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
             elif line.startswith("f "):
                 f.append([int(x.split("/")[0]) - 1 for x in line.split()[1:4]])
     if not v or not f:
-        raise ValueError(f"{path}: no vertices or faces; {_REBUILD}")
+        raise ValueError(f"{path}: no vertices or faces; {_remedy()}")
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int32)
 
 
-def _load_json(path: Path, what: str) -> dict:
+def _load_json(path: Path, what: str, assets_dir: Path) -> dict:
     if not path.is_file():
-        raise FileNotFoundError(f"{what} card not found: {path}; {_REBUILD}")
+        raise FileNotFoundError(f"{what} card not found: {path}; {_not_found_hint(assets_dir)}")
     try:
         return json.loads(path.read_text())
     except json.JSONDecodeError as e:
-        raise ValueError(f"{what} card {path} is not valid JSON ({e}); {_REBUILD}") from e
+        raise ValueError(f"{what} card {path} is not valid JSON ({e}); {_remedy()}") from e
 
 
 def _check_fields(data: dict, fields: dict, path: Path) -> None:
     for key, typ in fields.items():
         if key not in data:
-            raise ValueError(f"card {path} is missing field '{key}'; {_REBUILD}")
+            raise ValueError(f"card {path} is missing field '{key}'; {_remedy()}")
         ok = isinstance(data[key], (int, float)) if typ is float else isinstance(data[key], typ)
         if not ok or isinstance(data[key], bool):
             raise ValueError(f"card {path}: field '{key}' should be {typ.__name__}, got {data[key]!r}")
@@ -77,7 +91,7 @@ def _check_fields(data: dict, fields: dict, path: Path) -> None:
 def _file(card_dir: Path, rel: str, card_path: Path) -> Path:
     p = (card_dir / rel).resolve()
     if not p.is_file():
-        raise FileNotFoundError(f"card {card_path} refers to a missing file {p}; {_REBUILD}")
+        raise FileNotFoundError(f"card {card_path} refers to a missing file {p}; {_remedy()}")
     return p
 
 
@@ -137,7 +151,7 @@ def load_card(asset_id: str, assets_dir: Path = ASSETS_DIR) -> AssetCard:
     if asset_id not in ASSET_IDS and asset_id not in TWIN_IDS:
         raise ValueError(f"unknown asset '{asset_id}'; known: {ASSET_IDS + TWIN_IDS}")
     path = Path(assets_dir) / "objects" / asset_id / "card.json"
-    d = _load_json(path, f"asset '{asset_id}'")
+    d = _load_json(path, f"asset '{asset_id}'", assets_dir)
     _check_fields(d, _OBJECT_FIELDS, path)
     if d["asset_id"] != asset_id:
         raise ValueError(f"card {path} describes '{d['asset_id']}', expected '{asset_id}'")
@@ -152,10 +166,10 @@ def load_card(asset_id: str, assets_dir: Path = ASSETS_DIR) -> AssetCard:
         raise ValueError(f"card {path}: density and mass must be > 0 and friction >= 0")
     files = d["files"]
     if rigid and not (isinstance(d.get("rest_pose"), list) and len(d["rest_pose"]) == 7):
-        raise ValueError(f"card {path}: a rigid twin needs rest_pose [x, y, z, qw, qx, qy, qz]; {_REBUILD}")
+        raise ValueError(f"card {path}: a rigid twin needs rest_pose [x, y, z, qw, qx, qy, qz]; {_remedy()}")
     for key in ("surface", "tets", "visual") + (("collision",) if rigid else ()):
         if key not in files:
-            raise ValueError(f"card {path}: files.{key} missing; {_REBUILD}")
+            raise ValueError(f"card {path}: files.{key} missing; {_remedy()}")
     parts = tuple((p["name"], _file(path.parent, p["file"], path), tuple(p["color"])) for p in files["visual"])
     return AssetCard(
         asset_id=asset_id, twin_id=d["twin_id"], kind=d["kind"], description=d["description"],
@@ -193,7 +207,7 @@ def load_prop(name: str, assets_dir: Path = ASSETS_DIR) -> PropCard:
     if name not in PROP_NAMES:
         raise ValueError(f"unknown prop '{name}'; known: {PROP_NAMES}")
     path = Path(assets_dir) / "props" / name / "card.json"
-    d = _load_json(path, f"prop '{name}'")
+    d = _load_json(path, f"prop '{name}'", assets_dir)
     _check_fields(d, {"name": str, "dimensions": list, "friction": float, "color": list, "files": dict,
                       "regions": dict}, path)
     return PropCard(

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..fileio import atomic_write_json, read_json
-from ..paths import CALIBRATION_DIR
+from ..paths import CALIBRATION_DIR, missing_data_hint
 from ..physics.constants import physics_signature, signature_mismatch
 from . import protocol as P
 from .stats import gripper_envelope
@@ -118,8 +118,9 @@ def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR, chec
     """
     path = card_path(asset_id, directory)
     if not path.exists():
-        raise FileNotFoundError(f"no calibration card for '{asset_id}' at {path}; run "
-                                f"`python -m mani_skill_softvt.calibrate --assets {asset_id}`")
+        hint = missing_data_hint(directory, "SOFTVT_CALIBRATION_DIR", "calibration",
+                                 f"python -m mani_skill_softvt.calibrate --assets {asset_id}")
+        raise FileNotFoundError(f"no calibration card for '{asset_id}' at {path}; {hint}")
     try:
         data = read_json(path)
     except ValueError as e:
