@@ -169,3 +169,19 @@ def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mo
         assert f["traj_0/actions"].shape == (3, 7)
         if obs_mode == "rgb+tactile":
             assert f["traj_0/obs/tactile/left/rgb"].shape == (4, 240, 320, 3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("flags", [(), ("--use-env-states",)])
+def test_maniskill_replay_of_the_soft_sample_reproduces_the_fem_state_bit_for_bit(tmp_path, flags):
+    from mani_skill_softvt.paths import REPO_DIR
+
+    src = _copy(REPO_DIR / "demos" / "sample" / "object_soft" / "task3.h5", tmp_path)
+    _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), *flags, "-o", "state", "--save-traj")
+    dst = tmp_path / f"{src.stem}.state.pd_ee_pose.physx_cpu.h5"
+    with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
+        assert b["traj_0/success"][-1]
+        # Replaying the actions from the seed's reset is deterministic to the bit; with the recorded
+        # states restored, from state 1 on (ManiSkill 3.0.1 saves state 1 as state 0, see above).
+        start = 1 if flags else 0
+        np.testing.assert_array_equal(b["traj_0/env_states/soft"][start:], a["traj_0/env_states/soft"][start:])

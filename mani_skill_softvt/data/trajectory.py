@@ -67,14 +67,13 @@ def check_h5(path: Path, read: bool = True) -> str | None:
 
 def flatten_batch(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
     """Env state or observation (nested dicts, batch of one) as ``{"a/b": array}`` without the batch
-    axis; strings (the instruction) are left out: a trajectory stores its instruction once. The
-    rendered files' keys, and what a baseline policy reads live (``baselines.features``)."""
+    axis. The rendered files' keys, and what a baseline policy reads live (``baselines.features``)."""
     out = {}
     for k, v in tree.items():
         key = f"{prefix}/{k}" if prefix else k
         if isinstance(v, dict):
             out.update(flatten_batch(v, key))
-        elif not isinstance(v, str):
+        else:
             out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
     return out
 

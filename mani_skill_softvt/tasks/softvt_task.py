@@ -25,13 +25,16 @@ target (downward centroid speed above 0.25 m/s), or left the table.
 **Observation** (``obs_mode``): ``state`` (flat proprioception), ``state_dict``, ``rgb``
 (third-person ``base_camera`` and wrist ``hand_camera`` at 224x224) and ``rgb+tactile`` (plus
 both fingers' GelSight images and marker fields). ``agent`` holds joint positions/velocities,
-``extra`` the TCP pose and the jaw width; dict modes also carry ``instruction`` (a string).
-Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is in any mode; the
+``extra`` the TCP pose and the jaw width. Observations hold arrays only, as ManiSkill's tools
+need (RecordEpisode, replay_trajectory, vector envs' shared memory): the instruction is
+:attr:`SoftVTTaskEnv.instruction`. Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is in any mode; the
 evaluator reads the env's evaluator-only accessors (:meth:`SoftBodyEnv.evaluator_state`).
 
-**Action** (7-D, ``control_mode``): ``pd_ee_pose`` (absolute TCP position in the robot base
-frame, axis-angle orientation, gripper closure in [0, 1]) or ``pd_ee_pose_binary`` (gripper
-< 0.5 open, >= 0.5 close until the 10 N force limit).
+**Action** (``control_mode``): ``pd_ee_pose`` (the paper's 7-D action: absolute TCP position in
+the robot base frame, axis-angle orientation, gripper closure in [0, 1]), ``pd_joint_pos`` (7 arm
+joint targets and the closure: ManiSkill's motion-planning format), ``pd_joint_delta_pos`` and
+``pd_ee_delta_pose`` (ManiSkill's normalised deltas); each also ``<mode>_binary`` (gripper < 0.5
+open, >= 0.5 close until the 10 N force limit). See :mod:`mani_skill_softvt.tasks.robot`.
 
 **Reward:** sparse, 1 on success. **Episode end:** success, drop, or 300 control steps.
 
