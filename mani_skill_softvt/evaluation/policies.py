@@ -45,13 +45,13 @@ class ScriptedExpertPolicy(Policy):
 
     def reset(self, instruction: str, seed: int) -> None:
         from ..calibration.cards import load_calibration_card
-        from ..expert.pick_place import draw_closure, expert_actions, plan_pick_place
+        from ..expert.pick_place import draw_closure, mode_actions, plan_pick_place
 
         card = load_calibration_card(self.env.unwrapped.task.soft_asset_id)
         self.closure = draw_closure(card, seed)
         plan = plan_pick_place(self.env, self.closure, self.planner)
         self.name = f"scripted_expert[{plan.planner}]"  # the planner that actually ran (receipts)
-        self._actions = iter(a for _, a in expert_actions(self.env, plan))
+        self._actions = iter(a for _, a in mode_actions(self.env, plan))  # in the env's control mode
 
     def act(self, obs) -> np.ndarray:
         out = [a for _, a in zip(range(self.chunk), self._actions)]
