@@ -35,7 +35,7 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
-from mani_skill.sensors.camera import CameraConfig
+from mani_skill.sensors.camera import Camera, CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.common import to_numpy
 from mani_skill.utils.structs.types import SimConfig
@@ -189,6 +189,19 @@ class SoftBodyEnv(BaseEnv):
             if isinstance(sensor, GelSight):
                 images[name] = sensor.get_images()
         return images
+
+    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        if self._obs_mode != "none":
+            return super()._get_obs_sensor_data(apply_texture_transforms)
+        # Only render_mode="sensors"/"all" asks for sensor data in obs mode "none" (it observes
+        # nothing). ManiSkill asks the cameras for the obs mode's textures, none here, and then
+        # fails tiling an empty list; show them as in the other non-visual modes: colour and depth.
+        for obj in self._hidden_objects:
+            obj.hide_visual()
+        self.scene.update_render(update_sensors=True, update_human_render_cameras=False)
+        self.capture_sensor_data()
+        return {name: sensor.get_obs(position=False, segmentation=False, apply_texture_transforms=apply_texture_transforms)
+                for name, sensor in self.scene.sensors.items() if isinstance(sensor, Camera)}
 
     def get_sensor_params(self):
         # Tactile sensors have no camera parameters: keep sensor_param to the cameras' entries.

@@ -25,18 +25,25 @@ target (downward centroid speed above 0.25 m/s), or left the table.
 **Observation** (``obs_mode``): ``state`` (flat proprioception), ``state_dict``, ``rgb``
 (third-person ``base_camera`` and wrist ``hand_camera`` at 224x224) and ``rgb+tactile`` (plus
 both fingers' GelSight images and marker fields). ``agent`` holds joint positions/velocities,
-``extra`` the TCP pose and the jaw width. Observations hold arrays only, as ManiSkill's tools
-need (RecordEpisode, replay_trajectory, vector envs' shared memory): the instruction is
-:attr:`SoftVTTaskEnv.instruction`. Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is in any mode; the
-evaluator reads the env's evaluator-only accessors (:meth:`SoftBodyEnv.evaluator_state`).
+``extra`` the TCP pose and the jaw width. Observations are arrays only: the instruction is the
+env's (:attr:`SoftVTTaskEnv.instruction`). Nothing evaluator-only (FEM nodes, object poses,
+deformation, materials) is in any mode; the evaluator reads the env's evaluator-only accessors
+(:meth:`SoftBodyEnv.evaluator_state`).
 
-**Action** (``control_mode``): ``pd_ee_pose`` (the paper's 7-D action: absolute TCP position in
-the robot base frame, axis-angle orientation, gripper closure in [0, 1]), ``pd_joint_pos`` (7 arm
-joint targets and the closure: ManiSkill's motion-planning format), ``pd_joint_delta_pos`` and
-``pd_ee_delta_pose`` (ManiSkill's normalised deltas); each also ``<mode>_binary`` (gripper < 0.5
-open, >= 0.5 close until the 10 N force limit). See :mod:`mani_skill_softvt.tasks.robot`.
+**Action** (``control_mode``): ``pd_ee_pose`` (the default; 7-D: absolute TCP position in the robot
+base frame, axis-angle orientation, gripper closure in [0, 1]), ``pd_ee_delta_pose`` (7-D),
+``pd_joint_pos`` and ``pd_joint_delta_pos`` (8-D), each also ``<mode>_binary`` (gripper < 0.5 open,
+>= 0.5 close until the 10 N force limit); see :mod:`mani_skill_softvt.tasks.robot`.
 
-**Reward:** sparse, 1 on success. **Episode end:** success, drop, or 300 control steps.
+**Reward** (``reward_mode``): ``sparse`` (the default, as the benchmark is scored by success): 1 on
+success. ``dense``: staged as in ManiSkill's tabletop tasks (:mod:`~mani_skill_softvt.tasks.rewards`),
+each stage at most 1: reach (TCP to the instructed object's centroid), grasp, place (centroid to the
+target region's centre, while grasped or once in the target), release (the object coming to rest
+in the target, let go); success gives the maximum, 5. Deformation beyond the object's calibrated
+tolerance costs up to 1: tanh(max(0, R_t - 1)) with R_t = D_t / tau_o, tau_o from the calibration
+card of the object's soft asset (rigid twins: their soft asset's), loaded on the first dense
+reward (``calibration_dir`` to read cards elsewhere). ``normalized_dense``: ``dense`` / 5, in [0, 1].
+``none``: 0. **Episode end:** success, drop, or 300 control steps.
 
 **Reset options:** ``ood`` (one of :data:`~mani_skill_softvt.tasks.suites.OOD_CONDITIONS`) or
 the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_modulus_scale``.
@@ -52,7 +59,9 @@ from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
 
 from ..assets import load_card, load_prop
+from ..paths import CALIBRATION_DIR
 from . import constants as C
+from . import rewards
 from .soft_body_env import PropCollider, SoftBodyEnv, ObjectSpec
 from .suites import SUITES, TaskSpec, task_spec
 
@@ -63,13 +72,17 @@ class SoftVTTaskEnv(SoftBodyEnv):
     """Pick-and-place of a soft (or rigid-twin) object named by a language instruction."""
 
     SUPPORTED_OBS_MODES = OBS_MODES
-    SUPPORTED_REWARD_MODES = ("sparse", "none")
+    # ManiSkill's default reward mode is the first: sparse, the benchmark's success.
+    SUPPORTED_REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
 
     def __init__(self, *args, suite: str = "object_soft", task_id: int = 0, obs_mode: str | None = None,
-                 robot_init_qpos_noise: float = C.ROBOT_INIT_QPOS_NOISE, **kwargs):
+                 robot_init_qpos_noise: float = C.ROBOT_INIT_QPOS_NOISE, calibration_dir: str | None = None,
+                 **kwargs):
         self.task: TaskSpec = task_spec(suite, task_id)
         self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
+        self.calibration_dir = CALIBRATION_DIR if calibration_dir is None else calibration_dir
+        self._tau_o: float | None = None  # loaded by the first dense reward
         obs_mode = obs_mode or "state"
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
@@ -189,6 +202,45 @@ class SoftVTTaskEnv(SoftBodyEnv):
 
     def compute_sparse_reward(self, obs, action, info):
         return info["success"].float()
+
+    @property
+    def deformation_tolerance(self) -> float:
+        """tau_o of the instructed object: from the calibration card of its soft asset (a rigid twin's
+        soft asset), read once, on first use, so that envs without a dense reward need no card."""
+        if self._tau_o is None:
+            from ..calibration.cards import load_calibration_card
+
+            t = self.task
+            try:
+                card = load_calibration_card(t.soft_asset_id, self.calibration_dir)
+            except (FileNotFoundError, ValueError) as e:
+                twin = f" (the soft asset of the rigid twin '{t.asset_id}')" if t.rigid else ""
+                raise type(e)(f"the dense reward of {SUITES[t.suite].env_id} task {t.task_id} penalises "
+                              f"deformation beyond the tolerance tau_o of '{t.soft_asset_id}'{twin}, from its "
+                              f"calibration card: {e}; or make the env with reward_mode='sparse'") from None
+            self._tau_o = card.tau_o
+        return self._tau_o
+
+    def _target_region_centre(self) -> np.ndarray:
+        lo, hi = (np.asarray(v, np.float64) for v in self.target_region)
+        return self.target.pose.p[0].cpu().numpy().astype(np.float64) + 0.5 * (lo + hi)
+
+    def compute_dense_reward(self, obs, action, info):
+        # Evaluator-only quantities (centroid, velocity, D_t) shape the reward; none reaches the observation.
+        name = self.target_instance
+        kin = self._object_kinematics(name)
+        tcp = self.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
+        reward = rewards.staged_reward(
+            tcp_to_object=np.linalg.norm(kin["centroid"] - tcp),
+            object_to_target=np.linalg.norm(kin["centroid"] - self._target_region_centre()),
+            object_speed=np.linalg.norm(kin["velocity"]),
+            grasped=info["is_grasped"], in_target=info["in_target"], success=info["success"],
+            deformation_ratio=self.deformation(name) / self.deformation_tolerance,
+        )
+        return reward.reshape(1).to(self.device)
+
+    def compute_normalized_dense_reward(self, obs, action, info):
+        return rewards.normalized_reward(self.compute_dense_reward(obs, action, info))
 
     # ------------------------------------------------------------------ observations
     def _get_obs_extra(self, info):
