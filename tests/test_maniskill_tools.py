@@ -172,16 +172,34 @@ def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mo
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("flags", [(), ("--use-env-states",)])
-def test_maniskill_replay_of_the_soft_sample_reproduces_the_fem_state_bit_for_bit(tmp_path, flags):
+@pytest.mark.parametrize("flags,obs_mode", [((), "state"), (("--use-env-states",), "state"),
+                                            (("--use-env-states",), "rgb+tactile")])
+def test_maniskill_replay_of_the_soft_sample_reproduces_the_fem_state_bit_for_bit(tmp_path, flags, obs_mode):
     from mani_skill_softvt.paths import REPO_DIR
 
     src = _copy(REPO_DIR / "demos" / "sample" / "object_soft" / "task3.h5", tmp_path)
-    _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), *flags, "-o", "state", "--save-traj")
-    dst = tmp_path / f"{src.stem}.state.pd_ee_pose.physx_cpu.h5"
+    _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), *flags, "-o", obs_mode, "--save-traj")
+    dst = tmp_path / f"{src.stem}.{obs_mode}.pd_ee_pose.physx_cpu.h5"
     with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
         assert b["traj_0/success"][-1]
         # Replaying the actions from the seed's reset is deterministic to the bit; with the recorded
         # states restored, from state 1 on (ManiSkill 3.0.1 saves state 1 as state 0, see above).
         start = 1 if flags else 0
         np.testing.assert_array_equal(b["traj_0/env_states/soft"][start:], a["traj_0/env_states/soft"][start:])
+        if obs_mode == "rgb+tactile":
+            t = a["traj_0/actions"].shape[0]
+            assert b["traj_0/obs/tactile/left/depth"].shape == (t + 1, 240, 320)
+            assert b["traj_0/obs/tactile/left/depth"][()].max() > 0  # the soft object pressed the gel
+
+
+@pytest.mark.slow
+def test_soft_joint_space_demo_converts_into_the_papers_action_space(tmp_path):
+    from mani_skill_softvt.motionplanning import main
+
+    res = main(["-e", "SoftVTObjectSoft-v1", "--task-id", str(TASK), "-n", "1", "--record-dir", str(tmp_path)])
+    src = Path(res["path"])
+    assert json.loads(src.with_suffix(".json").read_text())["episodes"][0]["success"]
+    _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", "pd_ee_pose", "--save-traj")
+    dst = src.with_name(f"{src.stem}.none.pd_ee_pose.physx_cpu.h5")
+    with h5py.File(dst, "r") as f:
+        assert f["traj_0/success"][-1] and f["traj_0/actions"].shape[1] == 7
