@@ -25,7 +25,8 @@ import traceback
 import numpy as np
 
 from . import __version__
-from .evaluation.policies import BUILTIN, ScriptedExpertPolicy, load_policy
+from .evaluation.policies import BUILTIN, load_policy
+from .policy import is_privileged
 from .evaluation.remote import ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, TACTILE_MARKERS, TACTILE_SIDES
 
 DEFAULT_PORT = 8000  # openpi's default
@@ -63,16 +64,16 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
 
 def _servable() -> list[str]:
     """Built-in policies that read observations only (the scripted experts need the env)."""
-    return [k for k, c in BUILTIN.items() if not issubclass(c, ScriptedExpertPolicy)]
+    return [k for k, c in BUILTIN.items() if not is_privileged(c)]
 
 
 def make_policy_factory(spec: str):
     """A zero-argument constructor of the policy ``spec``; ValueError for privileged policies."""
-    if spec in BUILTIN and issubclass(BUILTIN[spec], ScriptedExpertPolicy):
+    if spec in BUILTIN and is_privileged(BUILTIN[spec]):
         raise ValueError(f"policy '{spec}' is privileged (it plans on the env's simulator state) and cannot be "
                          f"served; serve an observation-only policy: {', '.join(_servable())} or module:Class")
     probe = load_policy(spec)  # fails now, not on the first connection
-    if isinstance(probe, ScriptedExpertPolicy):
+    if is_privileged(probe):
         raise ValueError(f"policy '{spec}' is privileged (it needs the env) and cannot be served")
     return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
 

@@ -180,3 +180,20 @@ def test_records_of_another_tactile_model_are_another_run(tmp_path):
         append_jsonl(out, {**rec, "record_sha256": record_hash(rec)})
     got = run_records(out, "p.pt", "rgb+tactile", "pd_ee_pose")
     assert MODEL_VERSION > 1 and [r["task_id"] for r in got.values()] == [1]
+
+
+class ClaimsPrivilege(HoldPolicy):
+    """A user policy that declares itself privileged to get the env handed over."""
+
+    privileged = True
+    env = None
+
+    def bind(self, env):
+        self.env = env
+
+
+def test_a_user_policy_cannot_claim_the_privilege_of_the_builtin_experts(cube_env):
+    policy = ClaimsPrivilege()
+    rec = run_episode(cube_env, policy, _episode(0))
+    assert policy.env is None and not rec["receipt"]["privileged"]
+    assert rec["termination"] in ("timeout", "success", "dropped") and rec["steps"] > 0

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..evaluation.policies import Policy
+from ..policy import Policy
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import DPConfig
 from ..data.trajectory import flatten_batch

@@ -1,9 +1,9 @@
 """The policy interface of the evaluation and the built-in policies.
 
-A policy sees observations only: ``reset(instruction, seed)`` then ``act(obs) -> (k, 7)`` action
-chunks, each executed for up to ``replan_steps`` steps before the next call. Only the built-in
-scripted experts are privileged: the runner binds them to the env they plan on and labels their
-records so; every other policy (in process, or served over ``ws://``) never holds the env.
+The contract (``reset``, ``act``, ``name``, ``privileged``) is :mod:`mani_skill_softvt.policy`.
+Only the built-in scripted experts are privileged: the runner binds them to the env they plan on
+and labels their records so; every other policy (in process, or served over ``ws://``) never
+holds the env.
 """
 
 from __future__ import annotations
@@ -12,23 +12,14 @@ import importlib
 
 import numpy as np
 
-
-class Policy:
-    """What the evaluator calls: ``reset`` at each episode start, ``act`` for each action chunk."""
-
-    name = "policy"
-
-    def reset(self, instruction: str, seed: int) -> None:
-        raise NotImplementedError
-
-    def act(self, obs) -> np.ndarray:
-        raise NotImplementedError
+from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
 
 
 class ScriptedExpertPolicy(Policy):
     """The scripted pick-and-place expert, closure drawn from the calibrated envelope (privileged)."""
 
     name = "scripted_expert"
+    privileged = True  # plans on the simulator: the runner binds it to the env
 
     def __init__(self, chunk: int = 8, planner: str | None = None):
         from ..expert.pick_place import DEFAULT_PLANNER, PLANNERS

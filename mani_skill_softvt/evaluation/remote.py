@@ -2,7 +2,7 @@
 
 A policy server (an openpi ``serve_policy.py``, or :mod:`mani_skill_softvt.serve` for a project
 policy) runs in its own process, possibly on another machine with a GPU; the evaluator talks to
-it with :class:`WebsocketPolicy`, a :class:`~mani_skill_softvt.evaluation.policies.Policy` like
+it with :class:`WebsocketPolicy`, a :class:`~mani_skill_softvt.policy.Policy` like
 any other. The wire format is openpi's: msgpack with numpy arrays (``openpi_client.msgpack_numpy``),
 the server sends a metadata dict on connect, each request is one observation dict and each reply
 is ``{"actions": (k, 7)}`` in the env's action space (``pd_ee_pose``: TCP position in the robot
@@ -46,7 +46,7 @@ from openpi_client.websocket_client_policy import WebsocketClientPolicy
 from websockets.exceptions import ConnectionClosed
 
 from ..tasks.robot import base_frame_pose
-from .policies import Policy
+from ..policy import Policy
 
 ACTION_DIM = 7
 DEFAULT_CONNECT_TIMEOUT = 10.0  # s: TCP + websocket handshake + the server's metadata message

@@ -1,0 +1,40 @@
+"""The policy contract: what the evaluator, the policy server and every policy agree on.
+
+A policy sees observations only: ``reset(instruction, seed)`` at each episode start, then
+``act(obs) -> (k, d)`` action chunks in the env's control mode, each executed for up to the
+runner's ``replan_steps`` before the next call. ``name`` labels its records.
+
+A *privileged* policy (``privileged = True``: the scripted experts) plans on the simulator: the
+runner hands it the env through ``bind(env)`` before ``reset`` and labels its records so; it
+cannot be served over the network. Every other policy, in process or behind ``ws://``, never
+holds the env.
+
+This module imports nothing of the package, so policies, the evaluator and the server all build
+on it without import cycles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class Policy:
+    """What the evaluator calls: ``reset`` at each episode start, ``act`` for each action chunk."""
+
+    name = "policy"
+    privileged = False
+
+    def bind(self, env) -> None:
+        """The env a privileged policy plans on (called by the runner before ``reset``)."""
+        raise TypeError(f"{type(self).__name__} is not privileged: it sees observations only")
+
+    def reset(self, instruction: str, seed: int) -> None:
+        raise NotImplementedError
+
+    def act(self, obs) -> np.ndarray:
+        raise NotImplementedError
+
+
+def is_privileged(policy) -> bool:
+    """Whether ``policy`` (an instance or a class; any object with the contract's methods) reads the simulator."""
+    return bool(getattr(policy, "privileged", False))
