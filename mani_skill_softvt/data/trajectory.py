@@ -21,7 +21,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..fileio import atomic_write
+from ..fileio import atomic_write, atomic_write_json, read_json
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
@@ -106,6 +106,10 @@ def screen(ep: dict) -> list[str]:
     return problems
 
 
+# Per-step datasets of a ManiSkill trajectory (and the package's binary-gripper actions).
+MANISKILL_STEP_KEYS = ("actions", "actions_binary", "terminated", "truncated", "success", "fail")
+
+
 def _dataset(group, key: str, data) -> None:
     data = np.asarray(data)
     # Large per-step arrays (FEM nodes, states) compress well; gzip is lossless and deterministic.
@@ -120,7 +124,7 @@ def read_episode(path: Path, traj: str = "traj_0") -> dict:
             raise CorruptDataError(f"{path} holds no episode '{traj}' (it has {sorted(f.keys())}): it was written "
                                    f"by an older version or another tool; {REGENERATE}")
         g = f[traj]
-        ep = {k: g[k][()] for k in ("actions", "actions_binary", "terminated", "truncated", "success", "fail")}
+        ep = {k: g[k][()] for k in MANISKILL_STEP_KEYS if k in g}  # binary-mode demos have no actions_binary
         ep["env_states"] = {}
         g["env_states"].visititems(lambda k, v: ep["env_states"].__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
         ep["evaluator"] = {k: g["evaluator"][k][()] for k in g["evaluator"]}
@@ -166,7 +170,10 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
 
     Every recorded env state (reset + one per step) is restored and observed in order, so the
     cameras, the tactile images (whose shear tracking follows the episode) and the actions share
-    one timeline with no resampling. Observations go to ``traj_<i>/obs/...`` of ``out_h5``.
+    one timeline with no resampling. Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside
+    the episode's actions, flags and attributes, and the trajectory's json is written beside it:
+    ``out_h5`` is a ManiSkill trajectory in ``obs_mode``. The states are restored, not re-simulated
+    (ManiSkill's ``replay_trajectory --use-env-states`` steps the physics before each restore).
     """
     from ..evaluation.wrapper import make_env
 
@@ -193,7 +200,10 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                     u.set_state_dict(_state_dict_at(states, t))
                     frames.append(flatten_batch(u.get_obs()))
                 out = dst.create_group(name)
-                out.attrs["instruction"] = g.attrs["instruction"]
+                out.attrs.update(dict(g.attrs))  # seed, instruction, closure, ...
+                for k in MANISKILL_STEP_KEYS:  # a ManiSkill trajectory in this obs mode, loadable by its tools
+                    if k in g:
+                        _dataset(out, k, g[k][()])
                 if "tactile" in obs_mode:
                     out.attrs["tactile_model"] = TACTILE_MODEL_VERSION
                 for k in frames[0]:
@@ -203,4 +213,9 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
         atomic_write(out_h5, write)
     finally:
         env.close()
+    meta_path = Path(trajectory_h5).with_suffix(".json")
+    if meta_path.exists():  # the trajectory's json, for the rendered obs mode (ManiSkill pairs them by name)
+        meta = read_json(meta_path)
+        meta.setdefault("env_info", {}).setdefault("env_kwargs", {})["obs_mode"] = obs_mode
+        atomic_write_json(Path(out_h5).with_suffix(".json"), meta)
     return n
