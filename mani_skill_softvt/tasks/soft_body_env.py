@@ -566,7 +566,7 @@ class SoftBodyEnv(BaseEnv):
         if "soft" in state:
             # Batched (1, n) from get_state_dict, or one step (n,) as replay_trajectory hands it over.
             soft = np.asarray(to_numpy(state["soft"]))
-            self._set_soft_state_vector(soft.reshape(-1) if soft.ndim == 1 else soft[0])
+            self._set_soft_state_vector(soft if soft.ndim == 1 else soft[0])
 
     def _changed_rigid_state(self, state: dict) -> dict:
         """``state`` without the actors and articulation roots that already hold exactly the stored
