@@ -4,8 +4,8 @@
 
 Each asset is drawn from its card's visual meshes (what the task cameras see) with SAPIEN's
 CPU renderer, one tile per asset, labelled with id, size, mass and Young's modulus. Soft
-assets fill the top two rows, their rigid twins the bottom two (same mesh, colour and mass:
-only the stiffness in the label differs).
+assets fill the top two rows, their rigid twins the bottom two (same mesh, colour and mass; a
+twin is a PhysX rigid body, with no modulus).
 """
 
 from __future__ import annotations
@@ -65,8 +65,8 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 def _label(card: AssetCard) -> list[str]:
     dx, dy, dz = (1e3 * np.asarray(card.dimensions)).round().astype(int)
-    return [card.asset_id, f"{dx}x{dy}x{dz} mm  {1e3 * card.mass:.1f} g",
-            f"{card.kind}  E={card.youngs_modulus / 1e3:g} kPa"]
+    stiffness = "PhysX rigid body" if card.youngs_modulus is None else f"E={card.youngs_modulus / 1e3:g} kPa"
+    return [card.asset_id, f"{dx}x{dy}x{dz} mm  {1e3 * card.mass:.1f} g", f"{card.kind}  {stiffness}"]
 
 
 def render_gallery(tile: int = 256) -> np.ndarray:
