@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_vbd_schedule.py [--schedules 4x5 4x3 4x2 2x5 4x5@1e-3] [--asset soft_stw_cube_hq]
 
-The soft expert's wall time is the Newton tick (README, Benchmarks): substeps x iterations VBD
+The soft expert's wall time is the Newton tick (docs/benchmarks.md): substeps x iterations VBD
 sweeps per 240 Hz tick. Fewer sweeps are faster, and they change the physics the calibration
 cards, tolerances and demonstrations were made with. For each schedule (substeps x iterations,
 optionally @ VBD's friction smoothing velocity in m/s; the first row is the package's) this runs, in

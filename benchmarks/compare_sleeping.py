@@ -1,5 +1,5 @@
 """Does soft-body sleeping change the score? The expert on every Object-Soft task, ID seed 0,
-with sleeping and without (README, What is simulated; the issue's bound: same success, R_max
+with sleeping and without (docs/physics.md; the issue's bound: same success, R_max
 within 1e-3).
 
     .venv/bin/python benchmarks/compare_sleeping.py [--tasks 0 1 ... 9] [--json out.json]

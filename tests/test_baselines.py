@@ -1,7 +1,7 @@
 """Diffusion Policy baselines: inputs, windows, training (determinism, resume), the evaluation agent.
 
 Synthetic demonstration files in the package's on-disk layout keep these fast; the networks are
-shrunk with config overrides. The real training and evaluation runs are in README, Baselines.
+shrunk with config overrides. The real training and evaluation runs are in docs/baselines.md.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from mani_skill_softvt.calibration.stats import by_closure
 from mani_skill_softvt.paths import CALIBRATION_DIR
 
 # Plausible band of tau_o as % of the bounding-box diagonal: the paper's are 7-11 %; ours are
-# lower because our materials are stiffer (see README), but a tolerance below 0.5 % would be
+# lower because our materials are stiffer (see docs/calibration.md), but a tolerance below 0.5 % would be
 # FEM noise and above 15 % a crushed object.
 TAU_BAND = (0.5, 15.0)
 # Same seed and machine reproduce a trial bit for bit; across machines float summation order in

@@ -142,7 +142,7 @@ def test_save_restore_across_sleep_and_wake_is_bit_for_bit():
 # The awake FEM lets a resting object creep sideways (VBD's smoothed Coulomb friction has no
 # true stiction below FRICTION_EPSILON: 0.024 mm/s at 1e-4 m/s); asleep it does not. The expert
 # then grasps a spot a few hundredths of a millimetre away, and R_max moves by that much: the
-# issue's bound, 1e-3, holds for this task (README, What is simulated, for all ten).
+# issue's bound, 1e-3, holds for this task (docs/physics.md, for all ten).
 SLEEP_R_MAX_TOLERANCE = 1e-3
 
 

@@ -121,7 +121,7 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
     snaps = held_frames(asset_id.replace("soft_", "rigid_") if twin else asset_id, closures)
     # The soft asset is held at every closure of its envelope (that is how calibration defines
     # it). Its rigid twin shares the envelope, and a light grasp of a faceted twin can pivot out
-    # of the pads (README, limitations): its held grasps are the ones checked, at least three.
+    # of the pads (docs/limitations.md): its held grasps are the ones checked, at least three.
     lifted = [bool(s["lifted"]) for s in snaps]
     assert all(lifted) if not twin else sum(lifted) >= 3, f"{asset_id} twin={twin}: lifted at {closures[lifted]}"
     closures = closures[lifted]

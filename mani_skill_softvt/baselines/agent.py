@@ -41,7 +41,7 @@ def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
     if cfg.tactile and trained_on != TACTILE_MODEL_VERSION:
         raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders model "
                          f"{TACTILE_MODEL_VERSION} (tactile.constants.MODEL_VERSION): its touch inputs would not be what it "
-                         "learned. Re-render the demos and retrain it (README, Baselines)")
+                         "learned. Re-render the demos and retrain it (docs/baselines.md)")
     return cfg, ckpt["model"]
 
 

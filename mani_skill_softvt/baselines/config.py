@@ -23,7 +23,7 @@ vt-b    as vt-c                                       binary
 Where this differs from the paper, and why:
 
 - The tactile streams see the GelSight image *and* its depth map (``tactile_inputs="rgb+depth"``,
-  the default). On objects softer than the gel the RGB change is faint (README, tactile);
+  the default). On objects softer than the gel the RGB change is faint (docs/tactile.md);
   ``tactile_inputs="rgb"`` gives the paper's input. The policy's name in a record says which.
 - The paper's binary variants (VO-B, VT-B) are ablations of pi0.5, not of Diffusion Policy; here
   they are Diffusion Policy trained on the binary gripper column, as the benchmark's issue asks.

@@ -4,8 +4,7 @@
     python -m mani_skill_softvt.baselines.train --variant vo-c --config paper     # the appendix's recipe (GPU)
     python -m mani_skill_softvt.baselines.train --variant vo-b --set steps=500 batch_size=16
 
-Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (README,
-Baselines). Writes under ``--out`` (default ``outputs/baselines/<suite>/<variant>-<config>``):
+Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (docs/baselines.md). Writes under ``--out`` (default ``outputs/baselines/<suite>/<variant>-<config>``):
 
 - ``checkpoint.pt``: everything to resume (weights, EMA, optimiser, schedule, random state,
   losses), rewritten atomically every ``checkpoint_every`` steps; re-running the same command

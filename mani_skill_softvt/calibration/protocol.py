@@ -23,7 +23,7 @@ STEPS = {"approach": 10, "descend": 15, "close": 15, "lift": 20, "hold": 40}
 JITTER_XY = 2e-3  # m
 JITTER_YAW = np.deg2rad(5.0)
 
-# The paper's cards (its calibration table), for the README comparison: g_min, g_max, span mm, tau_o % diag.
+# The paper's cards (its calibration table), for the comparison in docs/calibration.md: g_min, g_max, span mm, tau_o % diag.
 PAPER_CARDS = {
     "soft_pastry001": (0.4000, 0.8000, 26.21, 7.6),
     "soft_pastry002": (0.6547, 0.6900, 2.56, 9.3),

@@ -1,6 +1,6 @@
 """Physics constants of the SAPIEN <-> Newton coupling (SI units).
 
-Values were measured on this project's 2-core CPU machines unless noted (README, "What is simulated").
+Values were measured on this project's 2-core CPU machines unless noted (docs/physics.md).
 """
 
 import numpy as np

@@ -12,7 +12,7 @@ Observation of one finger: ``{"rgb": (1, 240, 320, 3) uint8, "depth": (1, 240, 3
 indentation in micrometres (int16 like ManiSkill's camera depth), "marker_initial": (1, 99, 2) float32 px, "marker_current": (1, 99, 2)
 float32 px}``. The depth map is what a GelSight's photometric-stereo reconstruction gives; it is
 part of the observation because on objects softer than the gel (the foods and foams here) the
-indentation is tens of micrometres and the RGB change is faint (README, tactile).
+indentation is tens of micrometres and the RGB change is faint (docs/tactile.md).
 """
 
 from __future__ import annotations
