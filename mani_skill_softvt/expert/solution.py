@@ -3,7 +3,8 @@
 ``solve(env, seed=None, debug=False, vis=False)`` has the signature of the solutions in
 ``mani_skill.examples.motionplanning.panda.solutions``: it resets ``env`` with ``seed``, runs the
 plan and returns the last ``env.step`` result (its ``[-1]`` is the info with ``success`` and
-``elapsed_steps``), or -1 when no plan was found, as ManiSkill's runner expects. One solution
+``elapsed_steps``), or -1 when no plan was found, as ManiSkill's runner expects. The plan runs to
+its end (the object released and at rest), not only to the first step that succeeds. One solution
 serves all four suites (the task is one parametrised class).
 
 The plan is :func:`~mani_skill_softvt.expert.pick_place.plan_pick_place`: waypoints around the
@@ -57,7 +58,10 @@ def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = Non
         result = env.step(action)
         if vis:
             env.unwrapped.render_human()
-        _, _, terminated, truncated, _ = result
-        if bool(terminated) or bool(truncated):
+        _, _, _, truncated, info = result
+        # As ManiSkill's solutions do, the plan runs to its end past the first success (release,
+        # retreat, wait): a replay converted into another control mode lags the original by a few
+        # ticks, and must still end at rest in the target. A failure (a drop) or the time limit ends it.
+        if bool(truncated) or bool(info["fail"]):
             break
     return result
