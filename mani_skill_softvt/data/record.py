@@ -90,12 +90,14 @@ class SoftVTRecordEpisode(RecordEpisode):
 
     def _write_evaluator(self, group, episode: dict) -> None:
         u = self.env.unwrapped
+        if "env_states" in group:
+            _gzip_large_datasets(group["env_states"])
         ev = {k: np.asarray(v) for k, v in self._evaluator.items() if len(v)}
         tau_o = getattr(self.env, "tau_o", None)
         g = group.create_group("evaluator")
         for k, v in ev.items():
             # FEM nodes compress well; gzip is lossless and deterministic.
-            g.create_dataset(k, data=v, **({"compression": "gzip", "compression_opts": 4} if v.size > 4096 else {}))
+            g.create_dataset(k, data=v, **(GZIP if v.size > 4096 else {}))
         if tau_o is not None:
             g.create_dataset("tau_o", data=np.float64(tau_o))
         if not u.control_mode.endswith("_binary"):
@@ -124,6 +126,24 @@ class SoftVTRecordEpisode(RecordEpisode):
             super().close()
         finally:
             self.env = inner
+
+
+GZIP = {"compression": "gzip", "compression_opts": 4}  # lossless and deterministic
+
+
+def _gzip_large_datasets(group) -> None:
+    """Rewrite the group's large uncompressed datasets (the FEM state: ~2 MB an episode) with gzip:
+    RecordEpisode compresses only images. Values and dtypes are unchanged."""
+    import h5py
+
+    for key in list(group.keys()):
+        item = group[key]
+        if isinstance(item, h5py.Group):
+            _gzip_large_datasets(item)
+        elif item.size > 4096 and item.compression is None:
+            data = item[()]
+            del group[key]
+            group.create_dataset(key, data=data, **GZIP)
 
 
 class _NoClose:
