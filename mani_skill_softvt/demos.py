@@ -44,7 +44,7 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
     from .data.record import SoftVTRecordEpisode, episode_paths
     from .data.trajectory import read_episode, screen
     from .expert.solution import solve
-    from .motionplanning import SOURCE_DESC
+    from .expert.solution import SOURCE_DESC
 
     tmp_h5, tmp_json = episode_paths(path.with_name(f"{path.stem}.partial.h5"))
     rec = SoftVTRecordEpisode(env, output_dir=str(path.parent), trajectory_name=tmp_h5.stem, save_video=False,

@@ -25,9 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
-               "around the table, target and other instance (Cartesian fallback); gripper closure drawn from the "
-               "object's calibrated envelope [g_min, g_max]")
+from .expert.solution import SOURCE_DESC
 
 
 def parse_args(argv=None):

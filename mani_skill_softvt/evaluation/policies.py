@@ -35,11 +35,10 @@ class ScriptedExpertPolicy(Policy):
         self.env = env
 
     def reset(self, instruction: str, seed: int) -> None:
-        from ..calibration.cards import load_calibration_card
         from ..expert.pick_place import draw_closure, mode_actions, plan_pick_place
+        from ..expert.solution import expert_card
 
-        card = load_calibration_card(self.env.unwrapped.task.soft_asset_id)
-        self.closure = draw_closure(card, seed)
+        self.closure = draw_closure(expert_card(self.env), seed)  # the scorer's card, loaded once
         plan = plan_pick_place(self.env, self.closure, self.planner)
         self.name = f"scripted_expert[{plan.planner}]"  # the planner that actually ran (receipts)
         self._actions = iter(a for _, a in mode_actions(self.env, plan))  # in the env's control mode

@@ -23,6 +23,11 @@ from ..paths import CALIBRATION_DIR
 from .pick_place import DEFAULT_PLANNER, draw_closure, mode_actions, plan_pick_place
 
 
+SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
+               "around the table, target and other instance (Cartesian fallback); gripper closure drawn from the "
+               "object's calibrated envelope [g_min, g_max]")
+
+
 def expert_card(env, calibration_dir=CALIBRATION_DIR) -> CalibrationCard:
     """The calibration card the expert draws closures from: a DSR-wrapped env's own (the scorer's),
     else the card of the task's soft asset (rigid twins: their soft asset's)."""
