@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import paths
 from ..paths import ASSETS_DIR, missing_data_hint
+from .materials import SoftMaterial
 
 ASSET_IDS = [
     "soft_pastry001", "soft_pastry002", "soft_pastry003", "soft_stw_cube_hq", "soft_pastry005",
@@ -136,10 +137,8 @@ class AssetCard:
         with np.load(self.tet_file) as d:
             return d["vertices"].astype(np.float64), d["tets"].astype(np.int32)
 
-    def material(self):
+    def material(self) -> SoftMaterial:
         """The FEM material of a soft asset (a rigid twin has none)."""
-        from ..physics.fem import SoftMaterial
-
         if self.rigid:
             raise ValueError(f"'{self.asset_id}' is a rigid twin (a PhysX rigid body): it has no FEM material")
         return SoftMaterial(self.youngs_modulus, self.poisson_ratio, self.density, self.damping, self.friction)

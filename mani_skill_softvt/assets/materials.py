@@ -36,6 +36,10 @@ their soft asset: they still deformed (the expert's R_max had median 0.15) and c
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+from ..physics.constants import DEFAULT_OBJECT_FRICTION, DEFAULT_TET_DAMPING
+
 # asset id -> (density, youngs_modulus, poisson_ratio, damping, friction)
 MATERIALS = {
     "soft_pastry001": (250.0, 8.0e+04, 0.25, 1.0, 0.9),
@@ -54,3 +58,25 @@ TWIN_MAX_CONVEX_PARTS = 8
 
 # Props (rigid, simulated by SAPIEN; Newton sees them as colliders).
 PROP_FRICTION = {"table": 0.6, "basket": 0.7, "plate": 0.5, "distractor": 0.6}
+
+
+@dataclass(frozen=True)
+class SoftMaterial:
+    """Elastic material of a soft body (SI units). Pure data: the asset cards build it without
+    importing the simulator (``physics.fem`` consumes it)."""
+
+    youngs_modulus: float  # Pa
+    poisson_ratio: float
+    density: float  # kg/m^3
+    damping: float = DEFAULT_TET_DAMPING  # Pa*s, viscous damping of the strain rate (VBD k_damp)
+    friction: float = DEFAULT_OBJECT_FRICTION
+
+    def __post_init__(self):
+        if not self.youngs_modulus > 0:
+            raise ValueError(f"Young's modulus must be > 0 Pa, got {self.youngs_modulus}")
+        if not -1.0 < self.poisson_ratio < 0.5:
+            raise ValueError(f"Poisson ratio must lie in (-1, 0.5), got {self.poisson_ratio}")
+        if not self.density > 0:
+            raise ValueError(f"density must be > 0 kg/m^3, got {self.density}")
+        if self.damping < 0 or self.friction < 0:
+            raise ValueError("damping and friction must be non-negative")

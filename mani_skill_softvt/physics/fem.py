@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..paths import WARP_CACHE_DIR
+from ..assets.materials import SoftMaterial  # noqa: F401  (the material type lives with the assets' materials)
 from . import constants as C
 from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, box_gap, is_quiet, local_bounds, world_boxes
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
@@ -67,27 +68,6 @@ def vbd_schedule(youngs_moduli) -> tuple[int, int]:
     (see ``constants.NEWTON_SUBSTEPS_STIFF``)."""
     stiff = any(float(e) >= C.STIFF_MODULUS for e in youngs_moduli)
     return (C.NEWTON_SUBSTEPS_STIFF if stiff else C.NEWTON_SUBSTEPS), C.VBD_ITERATIONS
-
-
-@dataclass(frozen=True)
-class SoftMaterial:
-    """Elastic material of a soft body (SI units)."""
-
-    youngs_modulus: float  # Pa
-    poisson_ratio: float
-    density: float  # kg/m^3
-    damping: float = C.DEFAULT_TET_DAMPING  # Pa*s, viscous damping of the strain rate (VBD k_damp)
-    friction: float = C.DEFAULT_OBJECT_FRICTION
-
-    def __post_init__(self):
-        if not self.youngs_modulus > 0:
-            raise ValueError(f"Young's modulus must be > 0 Pa, got {self.youngs_modulus}")
-        if not -1.0 < self.poisson_ratio < 0.5:
-            raise ValueError(f"Poisson ratio must lie in (-1, 0.5), got {self.poisson_ratio}")
-        if not self.density > 0:
-            raise ValueError(f"density must be > 0 kg/m^3, got {self.density}")
-        if self.damping < 0 or self.friction < 0:
-            raise ValueError("damping and friction must be non-negative")
 
 
 def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
