@@ -29,7 +29,7 @@ from .fileio import append_jsonl, atomic_write_json, read_json
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
-from .tasks.suites import NUM_TASKS, SUITES, get_suite
+from .tasks.suites import NUM_TASKS, SUITES
 
 
 def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], dict]:

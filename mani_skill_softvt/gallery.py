@@ -33,6 +33,7 @@ import sapien
 from tqdm import tqdm
 
 from .assets.cards import ASSET_IDS, TWIN_IDS, AssetCard, load_card, read_obj
+from .assets.tetmesh import vertex_normals
 from .data.images import write_png
 from .paths import REPO_DIR
 
@@ -61,20 +62,12 @@ def _add_asset(scene: sapien.Scene, card: AssetCard, xy: tuple[float, float]) ->
         v, f = read_obj(path)
         body.attach(sapien.render.RenderShapeTriangleMesh(
             vertices=v.astype(np.float32), triangles=f.astype(np.uint32),
-            normals=_vertex_normals(v, f), uvs=np.zeros((len(v), 2), np.float32),
+            normals=vertex_normals(v, f), uvs=np.zeros((len(v), 2), np.float32),
             material=sapien.render.RenderMaterial(base_color=list(rgba), roughness=0.7)))
     entity = sapien.Entity()
     entity.add_component(body)
     entity.set_pose(sapien.Pose(p=[xy[0], xy[1], 0.0]))
     scene.add_entity(entity)
-
-
-def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)).astype(np.float32)
 
 
 def _label(card: AssetCard) -> list[str]:

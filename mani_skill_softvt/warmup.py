@@ -18,7 +18,6 @@ def main() -> None:
 
     from . import tasks  # noqa: F401
     from .tasks.robot import ee_action
-    from .tasks import constants as C
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose")
     env.reset(seed=0)

@@ -176,3 +176,12 @@ def embed_points(points: np.ndarray, vertices: np.ndarray, tets: np.ndarray) -> 
         j = int(np.argmax(worst)) if worst.max() >= -1e-9 else int(np.argmin(np.linalg.norm(centroids - p, axis=1)))
         tet_idx[i], weights[i] = j, bary[j]
     return tet_idx, weights
+
+
+def vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Unit vertex normals (float32) of a triangle mesh: the area-weighted sum of the adjacent faces' normals."""
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)).astype(np.float32)

@@ -16,7 +16,6 @@ The same functions turn a rendered demonstration frame (training) and a live env
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from ..data.images import resize_image

@@ -16,7 +16,6 @@ object is between the fingers.
 from __future__ import annotations
 
 import numpy as np
-import sapien
 import torch
 from mani_skill.utils.registration import register_env
 

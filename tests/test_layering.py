@@ -1,0 +1,64 @@
+"""The package's layering, read from its import statements (no simulator needed).
+
+Each concept lives in one place and depends only downwards: these checks keep the boundaries
+that a newcomer relies on when reading one layer without the others.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import mani_skill_softvt
+
+PACKAGE = Path(mani_skill_softvt.__file__).parent
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, anywhere in the file (lazy imports included), as absolute
+    names (``mani_skill_softvt.physics.fem``, ``warp``)."""
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    package = list(rel.parts[:-1])
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[:len(package) - node.level + 1] if node.level else []
+            mod = ".".join(base + ([node.module] if node.module else []))
+            out.add(mod)
+            # "from . import fingers" imports a module too
+            out.update(f"{mod}.{a.name}" for a in node.names)
+    return out
+
+
+def imports_any(path: Path, prefixes: tuple[str, ...]) -> list[str]:
+    return sorted(m for m in imported_modules(path) if any(m == p or m.startswith(p + ".") for p in prefixes))
+
+
+SIMULATORS = ("warp", "newton", "sapien", "mani_skill", "mani_skill_softvt.physics.fem",
+              "mani_skill_softvt.physics.coupling")
+
+
+@pytest.mark.parametrize("module", ["assets/cards.py", "assets/materials.py"])
+def test_asset_cards_and_their_material_type_import_no_simulator(module):
+    assert imports_any(PACKAGE / module, SIMULATORS) == []
+
+
+def test_the_env_reaches_its_objects_only_through_the_object_interface():
+    """FEM bodies and rigid twins sit behind tasks.objects: the env imports neither back end."""
+    backends = ("mani_skill_softvt.physics.fem", "mani_skill_softvt.physics.coupling", "mani_skill_softvt.physics.rigid")
+    assert imports_any(PACKAGE / "tasks/soft_body_env.py", backends) == []
+    source = (PACKAGE / "tasks/soft_body_env.py").read_text()
+    for branch in ("self._world", "self._rigid", "self._coupling", "RigidObject", "SoftBodyWorld"):
+        assert branch not in source, branch
+
+
+def test_the_policy_contract_imports_nothing_of_the_package():
+    assert imports_any(PACKAGE / "policy.py", ("mani_skill_softvt",)) == []
+
+
+def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
+    assert not (PACKAGE / "assets/gallery.py").exists() and not (PACKAGE / "tactile/gallery.py").exists()
+    for path in (PACKAGE / "assets").glob("*.py"):
+        assert imports_any(path, ("mani_skill_softvt.gallery",)) == [], path
