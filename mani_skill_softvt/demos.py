@@ -26,6 +26,7 @@ import numpy as np
 
 from .data.demo_set import DemoSet
 from .fileio import append_jsonl, atomic_write_json, read_json
+from .observations import tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
@@ -284,7 +285,7 @@ def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[s
 
 
 # Observation keys a rendering must have to count as current (older renderings lack the depth map).
-CURRENT_RENDER_KEYS = {"rgb+tactile": ("tactile/left/depth", "tactile/right/depth")}
+CURRENT_RENDER_KEYS = {"rgb+tactile": tuple(tactile_keys(("depth",)))}
 
 
 def _image_size(text: str) -> tuple[int, int] | None:

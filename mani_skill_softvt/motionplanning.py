@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .expert.solution import SOURCE_DESC
+from .observations import info_bool
 
 
 def parse_args(argv=None):
@@ -99,7 +100,7 @@ def _run(args, first: int, stride: int, count: int, traj_name: str, queue) -> st
         except Exception as e:  # noqa: BLE001  (an episode's failure is a result, as in ManiSkill's runner)
             print(f"seed {seed}: no valid solution: {e}")
             res = -1
-        success = res != -1 and bool(res[-1]["success"])
+        success = res != -1 and info_bool(res[-1], "success")
         queue.put(("tried", success))
         if args.only_count_success and not success:
             env.flush_trajectory(save=False)

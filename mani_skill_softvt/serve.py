@@ -27,7 +27,9 @@ import numpy as np
 from . import __version__
 from .evaluation.policies import BUILTIN, load_policy
 from .policy import is_privileged
-from .evaluation.remote import ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, TACTILE_MARKERS, TACTILE_SIDES
+from .evaluation.remote import (ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, PROMPT_KEY, QPOS_KEY, TACTILE_MARKERS,
+                                TACTILE_SIDES, TCP_POSE_KEY, tactile_wire_key)
+from .observations import QPOS, TCP_POSE, camera_key, nest, tactile_key
 
 DEFAULT_PORT = 8000  # openpi's default
 
@@ -42,24 +44,22 @@ def _batched(x, dtype=None):
 def from_openpi_observation(request: dict) -> tuple[dict, str]:
     """The env-style observation dict and the instruction of an openpi request (inverse of
     :func:`~mani_skill_softvt.evaluation.remote.to_openpi_observation` on the keys it sends)."""
-    needed = [*CAMERAS, "observation/qpos", "observation/tcp_pose_world", "prompt"]
+    needed = [*CAMERAS, QPOS_KEY, TCP_POSE_KEY, PROMPT_KEY]
     missing = [k for k in needed if k not in request]
     if missing:
         raise KeyError(f"request lacks {missing}: a project policy needs the lossless keys that "
                        "mani_skill_softvt.evaluation.remote.WebsocketPolicy sends")
-    instruction = str(request["prompt"])
-    obs = {"agent": {"qpos": _batched(request["observation/qpos"], np.float32)},
-           "extra": {"tcp_pose": _batched(request["observation/tcp_pose_world"], np.float32)},
-           "sensor_data": {cam: {"rgb": _batched(request[key], np.uint8)} for key, cam in CAMERAS.items()}}
-    if f"observation/tactile_{TACTILE_SIDES[0]}" in request:
-        obs["tactile"] = {side: {"rgb": _batched(request[f"observation/tactile_{side}"], np.uint8),
-                                 **{env_key: _batched(request[f"observation/tactile_{side}_{name}"], np.float32)
-                                    for name, env_key in TACTILE_MARKERS.items()}}
-                          for side in TACTILE_SIDES}
-        for side in TACTILE_SIDES:  # a client of an older package sends no depth map
-            if f"observation/tactile_{side}_depth" in request:
-                obs["tactile"][side]["depth"] = _batched(request[f"observation/tactile_{side}_depth"], np.int16)
-    return obs, instruction
+    instruction = str(request[PROMPT_KEY])
+    flat = {QPOS: _batched(request[QPOS_KEY], np.float32), TCP_POSE: _batched(request[TCP_POSE_KEY], np.float32),
+            **{camera_key(cam): _batched(request[key], np.uint8) for key, cam in CAMERAS.items()}}
+    if tactile_wire_key(TACTILE_SIDES[0]) in request:
+        for side in TACTILE_SIDES:
+            flat[tactile_key(side, "rgb")] = _batched(request[tactile_wire_key(side)], np.uint8)
+            for name, field in TACTILE_MARKERS.items():
+                flat[tactile_key(side, field)] = _batched(request[tactile_wire_key(side, name)], np.float32)
+            if tactile_wire_key(side, "depth") in request:  # a client of an older package sends no depth map
+                flat[tactile_key(side, "depth")] = _batched(request[tactile_wire_key(side, "depth")], np.int16)
+    return nest(flat), instruction
 
 
 def _servable() -> list[str]:

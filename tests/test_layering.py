@@ -62,3 +62,27 @@ def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
     assert not (PACKAGE / "assets/gallery.py").exists() and not (PACKAGE / "tactile/gallery.py").exists()
     for path in (PACKAGE / "assets").glob("*.py"):
         assert imports_any(path, ("mani_skill_softvt.gallery",)) == [], path
+
+
+# Observation keys are spelled in the contract (mani_skill_softvt/observations.py) and nowhere a
+# consumer reads them.
+CONSUMERS = ["evaluation/remote.py", "serve.py", "baselines/features.py", "baselines/dataset.py", "data/lerobot.py",
+             "evaluation/videos.py", "demos.py", "evaluation/policies.py", "baselines/agent.py"]
+KEY_SPELLINGS = ('"agent/qpos"', '"extra/tcp_pose"', "sensor_data/", '"tactile/', "tactile/{", '"base_camera"',
+                 '"hand_camera"', '"marker_initial"', '["agent"]', '["extra"]', '["sensor_data"]')
+
+
+@pytest.mark.parametrize("module", CONSUMERS)
+def test_consumers_take_observation_keys_from_the_contract(module):
+    source = (PACKAGE / module).read_text()
+    assert [k for k in KEY_SPELLINGS if k in source] == []
+    assert "mani_skill_softvt.observations" in imported_modules(PACKAGE / module)
+
+
+def test_one_flattener_and_one_info_reader():
+    for path in PACKAGE.rglob("*.py"):
+        if path.name == "observations.py":
+            continue
+        tree = ast.parse(path.read_text())
+        names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+        assert not names & {"flatten_batch", "info_bool", "_flag", "_np", "unbatch"}, path

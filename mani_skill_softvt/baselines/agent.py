@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..observations import flatten_batch
 from ..policy import Policy
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import DPConfig
-from ..data.trajectory import flatten_batch
 from .features import frame_features
 from .model import DiffusionPolicyModel, noise_scheduler
 from .train import empty_stats, load_checkpoint

@@ -29,6 +29,7 @@ from ..data.demo_set import DemoSet
 from ..data.trajectory import open_h5, tactile_model_of
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write
+from ..observations import CAMERAS, QPOS, TCP_POSE, camera_key, tactile_keys
 from .config import DPConfig
 from .features import frame_features
 
@@ -115,7 +116,7 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
                                          f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
                     a = ft[name][column][()].astype(np.float32)
                     obs = fr[name]["obs"]
-                    n = obs["extra/tcp_pose"].shape[0]
+                    n = obs[TCP_POSE].shape[0]
                     if n != len(a) + 1:
                         raise ValueError(f"{rendered}:{name}: {n} frames for {len(a)} actions (expected one more); "
                                          f"the rendering is stale: re-render task {task}")
@@ -141,10 +142,8 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
 
 
 def _needed_keys(cfg: DPConfig) -> list[str]:
-    keys = ["agent/qpos", "extra/tcp_pose", "sensor_data/base_camera/rgb", "sensor_data/hand_camera/rgb"]
-    if cfg.tactile:
-        keys += [f"tactile/{s}/{k}" for s in ("left", "right") for k in ("rgb", "depth", "marker_initial", "marker_current")]
-    return keys
+    keys = [QPOS, TCP_POSE, *(camera_key(c) for c in CAMERAS)]
+    return keys + (tactile_keys() if cfg.tactile else [])
 
 
 def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWindows:

@@ -19,12 +19,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.images import resize_image
+from ..observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
 from ..physics.transforms import down_rotvec
 from ..tasks.robot import base_frame_pose
 from .config import DPConfig
 
-FINGERS = ("left", "right")
-CAMERAS = {"base": "base_camera", "hand": "hand_camera"}
+FINGERS = SIDES
+CAMERAS = dict(zip(("base", "hand"), ENV_CAMERAS))  # input name -> the env's camera
 DOWN_ROTVEC = down_rotvec(0.0)
 
 
@@ -54,23 +55,23 @@ def marker_displacement(marker_initial: np.ndarray, marker_current: np.ndarray) 
 
 
 def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
-    """The policy inputs of one step from a flat observation (rendered keys such as
-    ``extra/tcp_pose``, ``sensor_data/base_camera/rgb``, ``tactile/left/depth``, one frame each:
-    :func:`~mani_skill_softvt.data.trajectory.flatten_batch` of an env observation)."""
+    """The policy inputs of one step from a flat observation (the flat keys of
+    :mod:`mani_skill_softvt.observations`, one frame each: a rendered file's frame, or
+    :func:`~mani_skill_softvt.observations.flatten_batch` of a live observation)."""
     # The jaw gap from the finger joints, as the env computes it: every observation path (env,
     # rendered file, policy server) carries qpos.
-    width = float(np.asarray(flat["agent/qpos"], np.float64).reshape(-1)[-2:].sum())
-    out = {"state": robot_state(flat["extra/tcp_pose"], width)}
+    width = float(np.asarray(flat[QPOS], np.float64).reshape(-1)[-2:].sum())
+    out = {"state": robot_state(flat[TCP_POSE], width)}
     for name, cam in CAMERAS.items():
-        out[name] = resize_image(np.asarray(flat[f"sensor_data/{cam}/rgb"]), cfg.camera_size)
+        out[name] = resize_image(np.asarray(flat[camera_key(cam)]), cfg.camera_size)
     if cfg.tactile:
         for side in FINGERS:
-            if f"tactile/{side}/rgb" not in flat:
+            if tactile_key(side, "rgb") not in flat:
                 raise ValueError(f"variant {cfg.variant} needs tactile observations: use obs_mode rgb+tactile")
-            depth = flat.get(f"tactile/{side}/depth")
-            out[f"tactile_{side}"] = tactile_image(np.asarray(flat[f"tactile/{side}/rgb"]), depth, cfg)
-        out["markers"] = np.stack([marker_displacement(flat[f"tactile/{side}/marker_initial"],
-                                                       flat[f"tactile/{side}/marker_current"]) for side in FINGERS])
+            depth = flat.get(tactile_key(side, "depth"))
+            out[f"tactile_{side}"] = tactile_image(np.asarray(flat[tactile_key(side, "rgb")]), depth, cfg)
+        out["markers"] = np.stack([marker_displacement(*(flat[tactile_key(side, f)] for f in MARKER_FIELDS))
+                                   for side in FINGERS])
     return out
 
 

@@ -26,6 +26,7 @@ import h5py
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
+from ..observations import CAMERAS, GRIPPER_WIDTH, MARKER_FIELDS, QPOS, QVEL, SIDES, TCP_POSE, camera_key, tactile_key
 from .trajectory import open_h5
 
 CODEBASE_VERSION = "v3.0"
@@ -40,12 +41,8 @@ QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 
 ACTION_NAMES = ["x", "y", "z", "rx", "ry", "rz", "gripper"]
 # Proprioception concatenated into observation.state, in this order: (rendered key, names prefix).
-STATE_PARTS = [("agent/qpos", "qpos"), ("agent/qvel", "qvel"), ("extra/tcp_pose", "tcp_pose"),
-               ("extra/gripper_width", "gripper_width")]
+STATE_PARTS = [(QPOS, "qpos"), (QVEL, "qvel"), (TCP_POSE, "tcp_pose"), (GRIPPER_WIDTH, "gripper_width")]
 TCP_POSE_NAMES = ["x", "y", "z", "qw", "qx", "qy", "qz"]
-CAMERAS = ("base_camera", "hand_camera")
-FINGERS = ("left", "right")
-MARKER_FIELDS = ("marker_initial", "marker_current")
 # The LeRobot columns every frame carries (same dtypes as LeRobot's DEFAULT_FEATURES).
 INDEX_FEATURES = {
     "timestamp": {"dtype": "float32", "shape": [1], "names": None},
@@ -68,14 +65,14 @@ class Source:
 
 def video_sources() -> dict[str, str]:
     """LeRobot video key -> rendered observation key (feature names may not contain '/')."""
-    out = {f"observation.images.{c}": f"sensor_data/{c}/rgb" for c in CAMERAS}
-    out.update({f"observation.images.tactile_{s}": f"tactile/{s}/rgb" for s in FINGERS})
+    out = {f"observation.images.{c}": camera_key(c) for c in CAMERAS}
+    out.update({f"observation.images.tactile_{s}": tactile_key(s, "rgb") for s in SIDES})
     return out
 
 
 def marker_sources() -> dict[str, str]:
     """LeRobot marker feature -> rendered key (an (N, 2) pixel field, flattened to 2N floats)."""
-    return {f"observation.tactile.{s}.{m}": f"tactile/{s}/{m}" for s in FINGERS for m in MARKER_FIELDS}
+    return {f"observation.tactile.{s}.{m}": tactile_key(s, m) for s in SIDES for m in MARKER_FIELDS}
 
 
 def required_obs_keys(use_videos: bool) -> list[str]:

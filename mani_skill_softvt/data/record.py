@@ -31,13 +31,9 @@ import numpy as np
 from mani_skill.utils.io_utils import dump_json
 from mani_skill.utils.wrappers.record import RecordEpisode
 
+from ..observations import info_bool
+
 ENV_ID_MODULE = "mani_skill_softvt"
-
-
-def _flag(info: dict, key: str) -> bool:
-    """A boolean of ``info``: a batch-of-one tensor from the env or a plain value from a wrapper."""
-    v = info.get(key, False)
-    return bool(v.reshape(-1)[0]) if hasattr(v, "reshape") else bool(v)
 
 
 class SoftVTRecordEpisode(RecordEpisode):
@@ -62,8 +58,8 @@ class SoftVTRecordEpisode(RecordEpisode):
         if "deformation_ratio" in info:
             ev["deformation_ratio"].append(float(info["deformation_ratio"]))
         if step:
-            ev["is_grasped"].append(_flag(info, "is_grasped"))
-            ev["dropped"].append(_flag(info, "dropped"))
+            ev["is_grasped"].append(info_bool(info, "is_grasped"))
+            ev["dropped"].append(info_bool(info, "dropped"))
             pads = u.pad_forces()
             ev["pad_force"].append([pads["left"], pads["right"]])
 

@@ -22,6 +22,7 @@ import h5py
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json, read_json
+from ..observations import flatten_batch, nest
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
@@ -63,19 +64,6 @@ def check_h5(path: Path, read: bool = True) -> str | None:
     except (CorruptDataError, FileNotFoundError) as e:
         return str(e)
     return None
-
-
-def flatten_batch(tree: dict, prefix: str = "") -> dict[str, np.ndarray]:
-    """Env state or observation (nested dicts, batch of one) as ``{"a/b": array}`` without the batch
-    axis. The rendered files' keys, and what a baseline policy reads live (``baselines.features``)."""
-    out = {}
-    for k, v in tree.items():
-        key = f"{prefix}/{k}" if prefix else k
-        if isinstance(v, dict):
-            out.update(flatten_batch(v, key))
-        else:
-            out[key] = np.asarray(v.cpu().numpy() if hasattr(v, "cpu") else v)[0]
-    return out
 
 
 def screen(ep: dict) -> list[str]:
@@ -149,14 +137,7 @@ def _state_dict_at(env_states: dict, t: int) -> dict:
     """Nested env state (ManiSkill's get_state_dict layout, batch of one) at step ``t``."""
     import torch
 
-    state: dict = {}
-    for key, v in env_states.items():
-        node = state
-        parts = key.split("/")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = torch.from_numpy(np.asarray(v[t])[None])
-    return state
+    return nest({key: torch.from_numpy(np.asarray(v[t])[None]) for key, v in env_states.items()})
 
 
 def tactile_model_of(episode_group) -> int:

@@ -53,11 +53,14 @@ class ScriptedExpertPolicy(Policy):
 
 def _tcp_action(obs, closure: float) -> np.ndarray:
     """An action holding the TCP pose read from the observation (state_dict / rgb modes)."""
-    if not isinstance(obs, dict) or "extra" not in obs:
-        raise ValueError("this policy reads obs['extra']['tcp_pose']: use obs_mode state_dict, rgb or rgb+tactile")
+    from ..observations import TCP_POSE, lookup
     from ..tasks.robot import base_frame_pose
 
-    pose = np.asarray(obs["extra"]["tcp_pose"]).reshape(-1)[:7]
+    try:
+        pose = lookup(obs, TCP_POSE).reshape(-1)[:7]
+    except (KeyError, TypeError):
+        raise ValueError(f"this policy reads the observation's {TCP_POSE}: use obs_mode state_dict, rgb or "
+                         "rgb+tactile") from None
     return np.concatenate([base_frame_pose(pose), [closure]]).astype(np.float32)
 
 

@@ -45,30 +45,30 @@ from openpi_client import msgpack_numpy
 from openpi_client.websocket_client_policy import WebsocketClientPolicy
 from websockets.exceptions import ConnectionClosed
 
-from ..tasks.robot import base_frame_pose
+from ..observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, lookup, tactile_key
 from ..policy import Policy
+from ..tasks.robot import base_frame_pose
 
 ACTION_DIM = 7
 DEFAULT_CONNECT_TIMEOUT = 10.0  # s: TCP + websocket handshake + the server's metadata message
 # s: one inference. Generous: a VLA server's first call may compile its model (minutes is rare, a
 # minute is not); a server that stays silent longer is treated as hung.
 DEFAULT_REPLY_TIMEOUT = 120.0
-CAMERAS = {"observation/image": "base_camera", "observation/wrist_image": "hand_camera"}
-TACTILE_SIDES = ("left", "right")
-TACTILE_MARKERS = {"markers_initial": "marker_initial", "markers_current": "marker_current"}
+# Wire key -> the env's camera (LIBERO's names: third-person image, wrist image).
+CAMERAS = dict(zip(("observation/image", "observation/wrist_image"), ENV_CAMERAS))
+TACTILE_SIDES = SIDES
+TACTILE_MARKERS = dict(zip(("markers_initial", "markers_current"), MARKER_FIELDS))  # wire suffix -> env field
+QPOS_KEY, TCP_POSE_KEY, PROMPT_KEY = "observation/qpos", "observation/tcp_pose_world", "prompt"
+
+
+def tactile_wire_key(side: str, suffix: str = "") -> str:
+    """Wire key of one finger's tactile image (``suffix`` "") or of its ``depth`` / marker field."""
+    return f"observation/tactile_{side}" + (f"_{suffix}" if suffix else "")
 EPISODE_RESET, EPISODE_SEED = "episode/reset", "episode/seed"
 
 
 class RemotePolicyError(RuntimeError):
     """The policy server is unreachable, went away, timed out, failed, or replied nonsense."""
-
-
-def _np(x) -> np.ndarray:
-    """A batched (1, ...) env tensor (torch or numpy) as its single numpy element."""
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().numpy()
-    x = np.asarray(x)
-    return x[0] if x.ndim and x.shape[0] == 1 else x
 
 
 def base_frame_state(tcp_pose_world: np.ndarray, finger_qpos: np.ndarray) -> np.ndarray:
@@ -81,17 +81,16 @@ def to_openpi_observation(obs: dict, instruction: str) -> dict:
     if not isinstance(obs, dict) or "sensor_data" not in obs:
         raise ValueError("a remote policy needs camera images: evaluate with obs_mode 'rgb' or 'rgb+tactile' "
                          f"(got an observation with keys {sorted(obs) if isinstance(obs, dict) else type(obs)})")
-    qpos = _np(obs["agent"]["qpos"]).astype(np.float32)
-    tcp_pose = _np(obs["extra"]["tcp_pose"]).astype(np.float32)
-    out = {key: np.ascontiguousarray(_np(obs["sensor_data"][cam]["rgb"])) for key, cam in CAMERAS.items()}
-    out.update({"observation/state": base_frame_state(tcp_pose, qpos[-2:]), "observation/qpos": qpos,
-                "observation/tcp_pose_world": tcp_pose, "prompt": str(instruction)})
+    qpos = lookup(obs, QPOS).astype(np.float32)
+    tcp_pose = lookup(obs, TCP_POSE).astype(np.float32)
+    out = {key: np.ascontiguousarray(lookup(obs, camera_key(cam))) for key, cam in CAMERAS.items()}
+    out.update({"observation/state": base_frame_state(tcp_pose, qpos[-2:]), QPOS_KEY: qpos,
+                TCP_POSE_KEY: tcp_pose, PROMPT_KEY: str(instruction)})
     for side in TACTILE_SIDES if "tactile" in obs else ():
-        t = obs["tactile"][side]
-        out[f"observation/tactile_{side}"] = np.ascontiguousarray(_np(t["rgb"]))
-        out[f"observation/tactile_{side}_depth"] = np.ascontiguousarray(_np(t["depth"]))
-        for name, env_key in TACTILE_MARKERS.items():
-            out[f"observation/tactile_{side}_{name}"] = _np(t[env_key]).astype(np.float32)
+        out[tactile_wire_key(side)] = np.ascontiguousarray(lookup(obs, tactile_key(side, "rgb")))
+        out[tactile_wire_key(side, "depth")] = np.ascontiguousarray(lookup(obs, tactile_key(side, "depth")))
+        for name, field in TACTILE_MARKERS.items():
+            out[tactile_wire_key(side, name)] = lookup(obs, tactile_key(side, field)).astype(np.float32)
     return out
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from .. import __version__
 from ..fileio import append_jsonl, read_jsonl_lines
+from ..observations import info_bool
 from ..parallel import WorkerDiedError, run_tasks
 from ..physics.fem import SimulationInstabilityError
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
@@ -156,7 +157,8 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
             if on_step is not None:
                 on_step(obs, info)
             if bool(terminated[0]) or bool(truncated[0]):
-                termination = "success" if info["task_success"] else "dropped" if bool(info["dropped"][0]) else "timeout"
+                termination = ("success" if info_bool(info, "task_success") else
+                               "dropped" if info_bool(info, "dropped") else "timeout")
                 break
     material = u.object_material(u.target_instance)
     e = material["youngs_modulus"]  # None for a rigid twin
@@ -169,8 +171,8 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
            "tactile_model": tactile_model(u.obs_mode),
            "termination": termination, "error": error,
-           "success": success, "dsr_success": success and bool(info["dsr_success"]),
-           "dropped": bool(info["dropped"][0]), "steps": steps, "r_max": float(env.r_max),
+           "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
+           "dropped": info_bool(info, "dropped"), "steps": steps, "r_max": float(env.r_max),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
     return _seal(rec)

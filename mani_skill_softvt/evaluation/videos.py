@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ..fileio import atomic_write
+from ..observations import CAMERAS, SIDES, camera_key, lookup, tactile_key
 
 FPS = 20  # the control rate: one frame per env step plays in real time
 STRIP_HEIGHT = 112
@@ -161,8 +162,7 @@ def compose_frame(base_rgb, hand_rgb, tactile_left, tactile_right, r_trace, *, i
 def frame_from_obs(obs: dict, r_trace, info: dict, instruction: str, max_steps: int) -> np.ndarray:
     """``compose_frame`` fed from an rgb+tactile observation and a DSRWrapper ``info``."""
     try:
-        cams, tac = obs["sensor_data"], obs["tactile"]
-        images = (cams["base_camera"]["rgb"], cams["hand_camera"]["rgb"], tac["left"]["rgb"], tac["right"]["rgb"])
+        images = [lookup(obs, camera_key(c)) for c in CAMERAS] + [lookup(obs, tactile_key(s, "rgb")) for s in SIDES]
     except (KeyError, TypeError) as e:
         raise ValueError(f"observation lacks {e}: videos need obs_mode 'rgb+tactile' (cameras and tactile images)") \
             from e

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from ..calibration.cards import load_calibration_card
-from ..paths import CALIBRATION_DIR
+from ..observations import info_bool
 from ..tasks.suites import get_suite
 from .metrics import deformation_ratio, dsr_success
 
@@ -21,14 +20,15 @@ class DSRWrapper(gym.Wrapper):
       bodies, so their R_max is ~0 and DSR equals TSR there by physics (the paper's premise), not
       by a special case.
 
-    tau_o comes from the calibration card of the task's soft asset (rigid twins: their soft
-    asset's card), loaded at construction.
+    tau_o comes from the env's calibration card (``env.unwrapped.calibration_card``: the task's
+    soft asset's, rigid twins their soft asset's, loaded once per env), the card the expert draws
+    its closures from and the dense reward reads.
     """
 
-    def __init__(self, env: gym.Env, calibration_dir=CALIBRATION_DIR):
+    def __init__(self, env: gym.Env):
         super().__init__(env)
         task = env.unwrapped.task
-        self.calibration_card = load_calibration_card(task.soft_asset_id, calibration_dir)
+        self.calibration_card = env.unwrapped.calibration_card
         self.tau_o = self.calibration_card.tau_o
         self.rigid = task.rigid  # recorded with each episode
         self.r_max = 0.0
@@ -40,7 +40,7 @@ class DSRWrapper(gym.Wrapper):
         r = deformation_ratio(d, self.tau_o)
         self.r_max = max(self.r_max, r)
         self.deformation_trace.append(d)
-        success = bool(info["success"][0])
+        success = info_bool(info, "success")
         info = dict(info)
         info.update(deformation_ratio=r, r_max=self.r_max, task_success=success,
                     dsr_success=dsr_success(success, self.r_max))
@@ -56,10 +56,13 @@ class DSRWrapper(gym.Wrapper):
         return obs, rew, terminated, truncated, self._score(info)
 
 
-def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=CALIBRATION_DIR, **kwargs) -> gym.Env:
+def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=None, **kwargs) -> gym.Env:
     """The env of ``suite``'s task ``task_id`` (``kwargs`` go to ``gym.make``: obs_mode,
-    control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``."""
+    control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``; its calibration card
+    is read from ``calibration_dir`` (default: the package's cards)."""
     from .. import tasks  # noqa: F401  (registers the envs)
 
+    if calibration_dir is not None:  # only then: recorded env kwargs stay free of machine paths
+        kwargs["calibration_dir"] = str(calibration_dir)
     env = gym.make(get_suite(suite).env_id, task_id=task_id, **kwargs)
-    return DSRWrapper(env, calibration_dir) if dsr else env
+    return DSRWrapper(env) if dsr else env

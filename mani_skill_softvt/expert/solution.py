@@ -18,8 +18,8 @@ motion-planning format) or ``pd_ee_pose`` (the paper's absolute TCP pose), eithe
 
 from __future__ import annotations
 
-from ..calibration.cards import CalibrationCard, load_calibration_card
-from ..paths import CALIBRATION_DIR
+from ..calibration.cards import CalibrationCard
+from ..observations import info_bool
 from .pick_place import DEFAULT_PLANNER, draw_closure, mode_actions, plan_pick_place
 
 
@@ -28,11 +28,10 @@ SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solu
                "object's calibrated envelope [g_min, g_max]")
 
 
-def expert_card(env, calibration_dir=CALIBRATION_DIR) -> CalibrationCard:
-    """The calibration card the expert draws closures from: a DSR-wrapped env's own (the scorer's),
-    else the card of the task's soft asset (rigid twins: their soft asset's)."""
-    card = getattr(env, "calibration_card", None)
-    return card if card is not None else load_calibration_card(env.unwrapped.task.soft_asset_id, calibration_dir)
+def expert_card(env) -> CalibrationCard:
+    """The calibration card the expert draws closures from: the env's own, which the DSR scorer and
+    the dense reward read too (the task's soft asset's; rigid twins: their soft asset's)."""
+    return env.unwrapped.calibration_card
 
 
 def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = None, planner: str = DEFAULT_PLANNER,
@@ -67,6 +66,6 @@ def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = Non
         # As ManiSkill's solutions do, the plan runs to its end past the first success (release,
         # retreat, wait): a replay converted into another control mode lags the original by a few
         # ticks, and must still end at rest in the target. A failure (a drop) or the time limit ends it.
-        if bool(truncated) or bool(info["fail"]):
+        if bool(truncated) or info_bool(info, "fail"):
             break
     return result

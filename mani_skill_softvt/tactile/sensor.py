@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..observations import SIDES
 from . import constants as C
 from ..physics.transforms import planar_rigid_fit
 from .gel import (balanced_indentation, footprint_mask, foundation_stiffness, geometric_indentation,
@@ -31,7 +32,6 @@ from .geometry import gap_from_triangles, to_pixels, validate_mesh
 from .markers import draw_markers, flow_matrix, marker_displacements, marker_grid
 from .optics import load_optics, render_image
 
-SIDES = ("left", "right")
 # Sign of the pad's x axis along the hand's x axis: the right camera is the mirror of the left.
 MIRROR_SIGN = {"left": 1.0, "right": -1.0}
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.transforms import pose_wxyz_to_matrix
-from ..tactile.sensor import SIDES, finger_pad_frame
+from ..observations import SIDES
+from ..tactile.sensor import finger_pad_frame
 from . import constants as C
 
 FINGER_LINKS = {side: f"panda_{side}finger" for side in SIDES}

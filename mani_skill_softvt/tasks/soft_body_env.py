@@ -39,10 +39,11 @@ from mani_skill.utils import sapien_utils
 from mani_skill.utils.common import to_numpy
 from mani_skill.utils.structs.types import SimConfig
 
+from ..observations import SIDES
 from ..physics.deformation import deformation
 from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.geometry import contact_polygons, polygons_mask
-from ..tactile.sensor import SIDES, world_to_pad
+from ..tactile.sensor import world_to_pad
 from . import constants as C
 from . import fingers
 from .objects import ObjectSpec, PropCollider, SceneObjects, build_objects  # noqa: F401  (specs: the tasks' API)

@@ -82,7 +82,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
         self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self.calibration_dir = CALIBRATION_DIR if calibration_dir is None else calibration_dir
-        self._tau_o: float | None = None  # loaded by the first dense reward
+        self._calibration_card = None  # loaded on first use (the DSR scorer, the expert, the dense reward)
         obs_mode = obs_mode or "state"
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
@@ -204,22 +204,27 @@ class SoftVTTaskEnv(SoftBodyEnv):
         return info["success"].float()
 
     @property
-    def deformation_tolerance(self) -> float:
-        """tau_o of the instructed object: from the calibration card of its soft asset (a rigid twin's
-        soft asset), read once, on first use, so that envs without a dense reward need no card."""
-        if self._tau_o is None:
+    def calibration_card(self):
+        """The calibration card of the instructed object's soft asset (a rigid twin's soft asset):
+        its envelope and tau_o. Loaded once, on first use, so that an env nobody scores needs no card;
+        the DSR scorer, the expert and the dense reward all read this one."""
+        if self._calibration_card is None:
             from ..calibration.cards import load_calibration_card
 
+            self._calibration_card = load_calibration_card(self.task.soft_asset_id, self.calibration_dir)
+        return self._calibration_card
+
+    @property
+    def deformation_tolerance(self) -> float:
+        """tau_o of the instructed object, from :attr:`calibration_card`."""
+        try:
+            return self.calibration_card.tau_o
+        except (FileNotFoundError, ValueError) as e:
             t = self.task
-            try:
-                card = load_calibration_card(t.soft_asset_id, self.calibration_dir)
-            except (FileNotFoundError, ValueError) as e:
-                twin = f" (the soft asset of the rigid twin '{t.asset_id}')" if t.rigid else ""
-                raise type(e)(f"the dense reward of {SUITES[t.suite].env_id} task {t.task_id} penalises "
-                              f"deformation beyond the tolerance tau_o of '{t.soft_asset_id}'{twin}, from its "
-                              f"calibration card: {e}; or make the env with reward_mode='sparse'") from None
-            self._tau_o = card.tau_o
-        return self._tau_o
+            twin = f" (the soft asset of the rigid twin '{t.asset_id}')" if t.rigid else ""
+            raise type(e)(f"the dense reward of {SUITES[t.suite].env_id} task {t.task_id} penalises "
+                          f"deformation beyond the tolerance tau_o of '{t.soft_asset_id}'{twin}, from its "
+                          f"calibration card: {e}; or make the env with reward_mode='sparse'") from None
 
     def _target_region_centre(self) -> np.ndarray:
         lo, hi = (np.asarray(v, np.float64) for v in self.target_region)
