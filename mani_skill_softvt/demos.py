@@ -74,13 +74,15 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
     from .evaluation.wrapper import make_env
 
     demo_set = DemoSet(out, suite)
-    done = {r["seed"] for r in demo_set.read_qc(task_id)}
+    qc = {r["seed"]: r for r in demo_set.read_qc(task_id)}  # a seed's latest verdict counts
     seeds = [train_seed(task_id, i) for i in range(num)]
     env = None
     for seed in seeds:
-        if seed in done:
+        if seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists()):
             queue.put(1)
             continue
+        # New, or accepted but its file is not here: the QC logs are committed, the demos are not,
+        # so a fresh checkout records the accepted episodes again (its new verdict is appended).
         if env is None:
             env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
             demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)

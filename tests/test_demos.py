@@ -51,6 +51,32 @@ def test_resuming_demos_recorded_under_other_physics_is_refused(dataset, tmp_pat
     assert json.loads((tmp_path / "object_soft" / "manifest.json").read_text()) == manifest  # left as it was
 
 
+def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lists(tmp_path):
+    """The QC logs are committed and the episode files are not: generate records an accepted
+    episode again where its file is missing, appends the new verdict and merges the task."""
+    from mani_skill_softvt.data.demo_set import DemoSet
+
+    generate("object_rigid", [3], 1, tmp_path)
+    demo_set = DemoSet(tmp_path, "object_rigid")
+    (first,) = demo_set.read_qc(3)
+    assert first["accepted"], first
+    episode = demo_set.episode_file(3, first["seed"])
+    with h5py.File(episode, "r") as f:
+        recorded = f["traj_0/env_states/actors"]
+        recorded = {k: recorded[k][()] for k in recorded}
+    episode.unlink()
+    episode.with_suffix(".json").unlink()
+    demo_set.trajectory(3).unlink()
+    report = generate("object_rigid", [3], 1, tmp_path)
+    assert report["tasks"][0]["accepted"] == 1 and demo_set.trajectory(3).exists()
+    again = demo_set.read_qc(3)
+    assert len(again) == 2 and again[1]["seed"] == first["seed"] and again[1]["r_max"] == first["r_max"]
+    with h5py.File(episode, "r") as f:  # same machine, same seed: the same episode, bit for bit
+        assert all(np.array_equal(f[f"traj_0/env_states/actors/{k}"][()], v) for k, v in recorded.items())
+    generate("object_rigid", [3], 1, tmp_path)  # now complete: nothing recorded again
+    assert len(demo_set.read_qc(3)) == 2
+
+
 def test_stored_states_replay_the_actions_bit_for_bit(dataset):
     out, _ = dataset
     ep = read_episode(next((out / "object_soft" / "task3").glob("ep_*.h5")))

@@ -173,20 +173,5 @@ def mode_actions(env, plan: ExpertPlan):
         yield phase, action
 
 
-def run_expert(env, closure: float, on_step=None, planner: str = DEFAULT_PLANNER) -> dict:
-    """Run the expert to the end of its plan or until the episode ends; return a summary."""
-    plan = plan_pick_place(env, closure, planner)
-    info, steps = {}, 0
-    for phase, action in mode_actions(env, plan):
-        _, _, terminated, truncated, info = env.step(action)
-        steps += 1
-        if on_step is not None:
-            on_step(phase, action, info)
-        if bool(terminated[0]) or bool(truncated[0]):
-            break
-    return {"steps": steps, "closure": closure, "planner": plan.planner,
-            "success": bool(info.get("success", [False])[0]), "dropped": bool(info.get("dropped", [False])[0])}
-
-
 TOTAL_STEPS = sum(PHASE_STEPS.values())
 assert TOTAL_STEPS < C.MAX_EPISODE_STEPS
