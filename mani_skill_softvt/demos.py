@@ -256,10 +256,42 @@ def format_stats(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str) -> int:
+    """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
+
+    Every recorded env state (reset + one per step) is restored and observed in order, so the
+    cameras, the tactile images (whose shear tracking follows the episode) and the actions share
+    one timeline with no resampling; the file is written by
+    :func:`~mani_skill_softvt.data.trajectory.write_rendering`. The states are restored, not
+    re-simulated (ManiSkill's ``replay_trajectory --use-env-states`` steps the physics before each
+    restore).
+    """
+    from .data.trajectory import state_dict_at, write_rendering
+    from .evaluation.wrapper import make_env
+    from .observations import flatten_batch
+
+    env = None
+
+    def observe(seed: int, states: dict) -> list[dict]:
+        nonlocal env
+        if env is None:
+            env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode)
+        env.reset(seed=seed)
+        frames = []
+        for t in range(len(next(iter(states.values())))):
+            env.unwrapped.set_state_dict(state_dict_at(states, t))
+            frames.append(flatten_batch(env.unwrapped.get_obs()))
+        return frames
+
+    try:
+        return write_rendering(trajectory_h5, out_h5, obs_mode, observe)
+    finally:
+        if env is not None:
+            env.close()
+
+
 def _render_task(suite: str, task_id: int, out: str, obs_mode: str, queue) -> tuple[int, int]:
     """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`)."""
-    from .data.trajectory import render_observations
-
     demo_set = DemoSet(Path(out), suite)
     return task_id, render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode), suite,
                                         task_id, obs_mode)

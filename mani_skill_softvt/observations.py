@@ -97,7 +97,11 @@ def lookup(obs: dict, key: str) -> np.ndarray:
     return unbatch(node)
 
 
+def as_bool(v) -> bool:
+    """A batch-of-one boolean (tensor or array, as the env's ``terminated`` and ``info`` flags) or a plain one."""
+    return bool(v.reshape(-1)[0]) if hasattr(v, "reshape") else bool(v)
+
+
 def info_bool(info: dict, key: str, default: bool = False) -> bool:
     """A boolean of ``info``: a batch-of-one tensor from the env, or a plain value from a wrapper."""
-    v = info.get(key, default)
-    return bool(v.reshape(-1)[0]) if hasattr(v, "reshape") else bool(v)
+    return as_bool(info.get(key, default))

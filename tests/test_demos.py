@@ -125,7 +125,7 @@ def test_stats(dataset, tmp_path):
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
-    from mani_skill_softvt.data.trajectory import render_observations
+    from mani_skill_softvt.demos import render_observations
 
     out, _ = dataset
     src = out / "object_soft" / "task3.h5"

@@ -86,3 +86,17 @@ def test_one_flattener_and_one_info_reader():
         tree = ast.parse(path.read_text())
         names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
         assert not names & {"flatten_batch", "info_bool", "_flag", "_np", "unbatch"}, path
+
+
+def test_one_episode_loop():
+    """Evaluation episodes, expert demonstrations and calibration trials are rollouts
+    (mani_skill_softvt/rollout.py); the only other env.step calls are the DSR wrapper passing a
+    step on, ManiSkill's action converters' signature (replay.py) and the kernel warm-up."""
+    stepping = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "env.step(" in p.read_text())
+    assert stepping == ["evaluation/wrapper.py", "replay.py", "rollout.py", "warmup.py"]
+
+
+def test_data_keeps_file_formats_and_does_not_plan():
+    for path in (PACKAGE / "data").glob("*.py"):
+        assert imports_any(path, ("mani_skill_softvt.expert", "mani_skill_softvt.evaluation",
+                                  "mani_skill_softvt.calibration")) == [], path

@@ -17,7 +17,7 @@ import pytest
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.demos import main
-from mani_skill_softvt.data.trajectory import render_observations
+from mani_skill_softvt.demos import render_observations
 from mani_skill_softvt.data.lerobot import (STATE_PARTS, Source, export_lerobot, marker_sources,
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR

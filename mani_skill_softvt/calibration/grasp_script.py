@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..policy import Policy
 from ..tasks.robot import ee_action, mid_height_grasp
 
 @dataclass
@@ -38,42 +39,78 @@ class GraspPlan:
         ]
 
 
+class GraspScriptPolicy(Policy):
+    """The script as a privileged policy: at ``reset`` it reads where the object rests (its
+    centroid, plus ``xy_offset``; the pads at its mid-height unless the plan says) and where the
+    TCP is, then hands out the phases' actions in order; ``phase_of(k)`` names the k-th action's
+    phase, its index in the phase and the phase's length."""
+
+    name = "grasp_script"
+    privileged = True
+
+    def __init__(self, plan: GraspPlan, object_name: str | None = None, xy_offset=(0.0, 0.0), chunk: int = 8):
+        self.plan, self.object_name, self.xy_offset, self.chunk = plan, object_name, xy_offset, chunk
+        self.env = None
+
+    def bind(self, env) -> None:
+        self.env = env
+
+    def reset(self, instruction: str, seed) -> None:
+        u = self.env.unwrapped
+        plan = self.plan
+        nodes = u.soft_nodes(self.object_name)
+        xy = nodes.mean(axis=0)[:2] + np.asarray(self.xy_offset, np.float64)
+        grasp_height = plan.grasp_height if plan.grasp_height is not None else mid_height_grasp(nodes)
+        tcp = u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
+        self.steps, self.actions = [], []
+        for phase, target, g in plan.phases(xy, grasp_height):
+            n = plan.steps.get(phase, 0)
+            start = tcp.copy()
+            for i in range(n):
+                a = min(1.0, (i + 1) / max(1, n - 2))  # reach the waypoint two steps early, then settle
+                self.steps.append((phase, i, n))
+                self.actions.append(ee_action(start + (target - start) * a, g, plan.yaw))
+            tcp = target
+        self._k = 0
+
+    @property
+    def done(self) -> bool:
+        return self._k >= len(self.actions)
+
+    def phase_of(self, k: int) -> tuple[str, int, int]:
+        return self.steps[k]
+
+    def act(self, obs) -> np.ndarray:
+        out = self.actions[self._k:self._k + self.chunk]
+        self._k += len(out)
+        return np.stack(out)
+
+
 def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None = None, on_step=None,
                      xy_offset=(0.0, 0.0)) -> dict:
-    """Execute the script on an env that was just reset; return per-step records (numpy arrays).
+    """Execute the script on an env that was just reset (a rollout of :class:`GraspScriptPolicy`
+    to its end); return per-step records (numpy arrays) from the evaluator trace.
 
     ``on_step(phase, i, n)`` is called after every control step; returning ``"stop"`` ends the
     script early (e.g. a calibration trial whose object was not lifted).
     """
-    u = env.unwrapped
-    plan = plan or GraspPlan()
-    nodes = u.soft_nodes(object_name)
-    xy = nodes.mean(axis=0)[:2] + np.asarray(xy_offset, np.float64)
-    grasp_height = plan.grasp_height if plan.grasp_height is not None else mid_height_grasp(nodes)
-    tcp = u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
-    rec = {k: [] for k in ("phase", "deformation", "gripper_width", "object_min_z", "object_centroid", "tcp",
-                           "tcp_quat", "pad_force")}
-    stop = False
-    for phase, target, g in plan.phases(xy, grasp_height):
-        n = plan.steps.get(phase, 0)
-        start = tcp.copy()
-        for i in range(n):
-            a = min(1.0, (i + 1) / max(1, n - 2))  # reach the waypoint two steps early, then settle
-            tcp_cmd = start + (target - start) * a
-            env.step(ee_action(tcp_cmd, g, plan.yaw))
-            nodes = u.soft_nodes(object_name)
-            rec["phase"].append(phase)
-            rec["deformation"].append(u.deformation(object_name))
-            rec["gripper_width"].append(u.gripper_width)
-            rec["object_min_z"].append(float(nodes[:, 2].min()))
-            rec["object_centroid"].append(nodes.mean(axis=0))
-            rec["tcp"].append(u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64))
-            rec["tcp_quat"].append(u.agent.tcp.pose.q[0].cpu().numpy().astype(np.float64))
-            rec["pad_force"].append(u.pad_forces()["left"])
-            if on_step is not None and on_step(phase, i, n) == "stop":
-                stop = True
-                break
-        if stop:
-            break
-        tcp = target
-    return {k: np.asarray(v) for k, v in rec.items()}
+    from ..rollout import EvaluatorTrace, Observer, rollout
+
+    object_name = object_name or env.unwrapped.object_names[0]  # the scene's first object unless named
+    script = GraspScriptPolicy(plan or GraspPlan(), object_name, xy_offset)
+    trace = EvaluatorTrace(object_name)
+    phases = []
+
+    class Phases(Observer):
+        def on_step(self, env, action, obs, info):
+            phases.append(script.phase_of(len(phases)))
+            return on_step is not None and on_step(*phases[-1]) == "stop"
+
+    episode = rollout(env, script, reset=False, observers=[trace, Phases()], until="script")
+    if episode.exception is not None:
+        raise episode.exception
+    t = trace.arrays()
+    return {"phase": np.asarray([p for p, _, _ in phases]), "deformation": t["deformation"],
+            "gripper_width": t["gripper_width"], "object_min_z": t["object_min_z"],
+            "object_centroid": t["object_centroid"], "tcp": t["tcp"], "tcp_quat": t["tcp_quat"],
+            "pad_force": t["pad_force"][:, 0]}

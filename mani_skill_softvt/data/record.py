@@ -31,7 +31,10 @@ import numpy as np
 from mani_skill.utils.io_utils import dump_json
 from mani_skill.utils.wrappers.record import RecordEpisode
 
-from ..observations import info_bool
+from ..rollout import EvaluatorTrace
+
+# The evaluator trace's fields a recorded episode keeps beside "nodes" (float32), in this order.
+RECORDED = ("object_centroids", "deformation", "deformation_ratio", "is_grasped", "dropped", "pad_force")
 
 ENV_ID_MODULE = "mani_skill_softvt"
 
@@ -42,45 +45,29 @@ class SoftVTRecordEpisode(RecordEpisode):
     def __init__(self, env, output_dir, *args, **kwargs):
         super().__init__(env, output_dir, *args, **kwargs)
         self.episode_metadata: dict = {}
-        self._evaluator: dict[str, list] | None = None
+        self._trace: EvaluatorTrace | None = None
         info = getattr(self, "_json_data", {}).get("env_info")
         if info is not None and ":" not in info["env_id"]:
             info["env_id"] = f"{ENV_ID_MODULE}:{info['env_id']}"
 
     # ------------------------------------------------------------------ stream
-    def _observe(self, info: dict, step: bool) -> None:
-        u = self.env.unwrapped
-        name = u.target_instance
-        ev = self._evaluator
-        ev["nodes"].append(u.soft_nodes(name).astype(np.float32))
-        ev["object_centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
-        ev["deformation"].append(u.deformation(name))
-        if "deformation_ratio" in info:
-            ev["deformation_ratio"].append(float(info["deformation_ratio"]))
-        if step:
-            ev["is_grasped"].append(info_bool(info, "is_grasped"))
-            ev["dropped"].append(info_bool(info, "dropped"))
-            pads = u.pad_forces()
-            ev["pad_force"].append([pads["left"], pads["right"]])
-
     def reset(self, *args, **kwargs):
         obs, info = super().reset(*args, **kwargs)
         self.episode_metadata = {}
-        self._evaluator = {k: [] for k in ("nodes", "object_centroids", "deformation", "deformation_ratio",
-                                           "is_grasped", "dropped", "pad_force")}
-        self._observe(info, step=False)
+        self._trace = EvaluatorTrace()  # the instructed object
+        self._trace.on_reset(self, obs, info)
         return obs, info
 
     def step(self, action):
         obs, rew, terminated, truncated, info = super().step(action)
-        self._observe(info, step=True)
+        self._trace.on_step(self, action, obs, info)
         return obs, rew, terminated, truncated, info
 
     # ------------------------------------------------------------------ files
     def flush_trajectory(self, verbose=False, ignore_empty_transition=True, env_idxs_to_flush=None, save=True):
         before = self._episode_id
         super().flush_trajectory(verbose, ignore_empty_transition, env_idxs_to_flush, save)
-        if save and self.save_trajectory and self._episode_id != before and self._evaluator is not None:
+        if save and self.save_trajectory and self._episode_id != before and self._trace is not None:
             self._write_evaluator(self._h5_file[f"traj_{self._episode_id}"], self._json_data["episodes"][-1])
             dump_json(self._json_path, self._json_data, indent=2)
 
@@ -88,7 +75,8 @@ class SoftVTRecordEpisode(RecordEpisode):
         u = self.env.unwrapped
         if "env_states" in group:
             _gzip_large_datasets(group["env_states"])
-        ev = {k: np.asarray(v) for k, v in self._evaluator.items() if len(v)}
+        t = self._trace.arrays()
+        ev = {"nodes": t["nodes"].astype(np.float32), **{k: t[k] for k in RECORDED if k in t}}
         tau_o = getattr(self.env, "tau_o", None)
         g = group.create_group("evaluator")
         for k, v in ev.items():

@@ -22,7 +22,7 @@ import h5py
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json, read_json
-from ..observations import flatten_batch, nest
+from ..observations import nest
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
@@ -133,7 +133,7 @@ def episode_json_line(ep: dict, problems: list[str]) -> str:
                        "steps": int(len(ep["actions"])), "r_max": float(np.max(ep["evaluator"]["deformation_ratio"]))})
 
 
-def _state_dict_at(env_states: dict, t: int) -> dict:
+def state_dict_at(env_states: dict, t: int) -> dict:
     """Nested env state (ManiSkill's get_state_dict layout, batch of one) at step ``t``."""
     import torch
 
@@ -146,23 +146,19 @@ def tactile_model_of(episode_group) -> int:
     return int(episode_group.attrs.get("tactile_model", 1))
 
 
-def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str) -> int:
-    """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
+def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode) -> int:
+    """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many.
 
-    Every recorded env state (reset + one per step) is restored and observed in order, so the
-    cameras, the tactile images (whose shear tracking follows the episode) and the actions share
-    one timeline with no resampling. Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside
-    the episode's actions, flags and attributes, and the trajectory's json is written beside it:
-    ``out_h5`` is a ManiSkill trajectory in ``obs_mode``. The states are restored, not re-simulated
-    (ManiSkill's ``replay_trajectory --use-env-states`` steps the physics before each restore).
+    ``observe_episode(seed, states)`` restores each of an episode's recorded env states (flat
+    ``env_states`` keys, (T+1, ...) arrays: reset + one per step) in order and returns one flat
+    observation per state (:func:`mani_skill_softvt.demos.render_observations` does it with the
+    env). Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside the episode's actions,
+    flags and attributes, and the trajectory's json is written beside it: ``out_h5`` is a
+    ManiSkill trajectory in ``obs_mode``. Written atomically; the source is checked first.
     """
-    from ..evaluation.wrapper import make_env
-
-    problem = check_h5(trajectory_h5)  # small (states only): read it all before building the env
+    problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
     if problem:
         raise CorruptDataError(problem)
-    env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode)
-    u = env.unwrapped
     n = 0
 
     def write(tmp: Path):
@@ -172,14 +168,10 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                 g = src[name]
                 states = {}
                 g["env_states"].visititems(lambda k, v: states.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
-                env.reset(seed=int(g.attrs["seed"]))
-                frames = []
                 steps = {len(v) for v in states.values()}  # one state per step in every group
                 if len(steps) != 1:
                     raise CorruptDataError(f"{trajectory_h5}:{name}: env_states groups differ in length {sorted(steps)}")
-                for t in range(steps.pop()):
-                    u.set_state_dict(_state_dict_at(states, t))
-                    frames.append(flatten_batch(u.get_obs()))
+                frames = observe_episode(int(g.attrs["seed"]), states)
                 out = dst.create_group(name)
                 out.attrs.update(dict(g.attrs))  # seed, instruction, closure, ...
                 for k in MANISKILL_STEP_KEYS:  # a ManiSkill trajectory in this obs mode, loadable by its tools
@@ -190,10 +182,8 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
                 for k in frames[0]:
                     _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
                 n += 1
-    try:
-        atomic_write(out_h5, write)
-    finally:
-        env.close()
+
+    atomic_write(out_h5, write)
     meta_path = Path(trajectory_h5).with_suffix(".json")
     if meta_path.exists():  # the trajectory's json, for the rendered obs mode (ManiSkill pairs them by name)
         meta = read_json(meta_path)

@@ -12,43 +12,8 @@ import importlib
 
 import numpy as np
 
+from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
 from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
-
-
-class ScriptedExpertPolicy(Policy):
-    """The scripted pick-and-place expert, closure drawn from the calibrated envelope (privileged)."""
-
-    name = "scripted_expert"
-    privileged = True  # plans on the simulator: the runner binds it to the env
-
-    def __init__(self, chunk: int = 8, planner: str | None = None):
-        from ..expert.pick_place import DEFAULT_PLANNER, PLANNERS
-
-        planner = planner or DEFAULT_PLANNER
-        if planner not in PLANNERS:
-            raise ValueError(f"unknown expert planner '{planner}'; choose one of {PLANNERS}")
-        self.chunk = chunk
-        self.planner = planner
-
-    def bind(self, env) -> None:
-        """The evaluator hands the built-in expert (and only it) the env it plans on."""
-        self.env = env
-
-    def reset(self, instruction: str, seed: int) -> None:
-        from ..expert.pick_place import draw_closure, mode_actions, plan_pick_place
-        from ..expert.solution import expert_card
-
-        self.closure = draw_closure(expert_card(self.env), seed)  # the scorer's card, loaded once
-        plan = plan_pick_place(self.env, self.closure, self.planner)
-        self.name = f"scripted_expert[{plan.planner}]"  # the planner that actually ran (receipts)
-        self._actions = iter(a for _, a in mode_actions(self.env, plan))  # in the env's control mode
-
-    def act(self, obs) -> np.ndarray:
-        out = [a for _, a in zip(range(self.chunk), self._actions)]
-        if not out:  # plan finished: hold the last action
-            out = [self._last]
-        self._last = out[-1]
-        return np.stack(out)
 
 
 def _tcp_action(obs, closure: float) -> np.ndarray:
@@ -94,15 +59,6 @@ class RandomPolicy(Policy):
         a[:3] += self.rng.uniform(-0.05, 0.05, 3)
         a[6] = self.rng.uniform(0.0, 1.0)
         return a[None]
-
-
-class CartesianExpertPolicy(ScriptedExpertPolicy):
-    """The scripted expert with straight-line Cartesian moves instead of mplib's planned paths."""
-
-    name = "scripted_expert_cartesian"
-
-    def __init__(self, chunk: int = 8):
-        super().__init__(chunk, planner="cartesian")
 
 
 BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPolicy, "hold": HoldPolicy,

@@ -29,19 +29,16 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
 
 from .. import __version__
 from ..fileio import append_jsonl, read_jsonl_lines
 from ..observations import info_bool
 from ..parallel import WorkerDiedError, run_tasks
-from ..physics.fem import SimulationInstabilityError
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .protocols import episode_key
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
 UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
-MAX_ERROR_CHARS = 2000
 
 
 class RecordIntegrityError(ValueError):
@@ -98,81 +95,42 @@ def _seal(rec: dict) -> dict:
     return rec
 
 
-def _error_text(e: BaseException, where: str) -> str:
-    text = f"{type(e).__name__} in {where}: {e}"
-    return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS] + " [...]"
-
-
-def _action_chunk(raw, env, replan_steps: int) -> list:
-    """The actions of a chunk that will be executed, each validated by the env (numbers, shape, finite)."""
-    from mani_skill.utils.common import to_numpy
-
-    chunk = np.asarray(to_numpy(raw)) if not isinstance(raw, (list, tuple)) else np.asarray(raw)
-    if chunk.ndim == 1:
-        chunk = chunk[None]
-    if chunk.ndim != 2 or len(chunk) == 0:
-        raise ValueError(f"act() must return an action (7,) or a chunk (k, 7) with k >= 1, got shape {chunk.shape}")
-    return [env.validate_action(a) for a in chunk[:replan_steps]]
-
-
 def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None) -> dict:
-    """One episode of ``policy`` on a DSR-wrapped env; the record with its audit receipt.
+    """One episode of ``policy`` on a DSR-wrapped env (a :func:`~mani_skill_softvt.rollout.rollout`
+    that the env ends); the record with its audit receipt.
 
     Never raises for what the policy does (see the module docstring for the terminations).
     ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
     ``policy_spec`` is how the policy was named to the evaluator (default: its ``name``).
     """
-    from ..policy import is_privileged
+    from ..rollout import Observer, rollout
+
+    class Callback(Observer):
+        def on_reset(self, env, obs, info):
+            on_step(obs, info)
+
+        def on_step(self, env, action, obs, info):
+            on_step(obs, info)
 
     u = env.unwrapped
-    seed = int(episode["seed"])
     options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
-    obs, info = env.reset(seed=seed, options=options)
-    if on_step is not None:
-        on_step(obs, info)
-    # Only the built-in scripted experts read the simulator; the runner, not the policy, says so.
-    # A policy from outside the package that claims the privilege runs as what it is: observation-only.
-    privileged = is_privileged(policy) and type(policy).__module__.startswith("mani_skill_softvt.")
-    if privileged:
-        policy.bind(env)
-    steps, termination, error = 0, None, None
     t0 = time.perf_counter()
-    try:
-        policy.reset(u.instruction, seed)
-    except Exception as e:  # noqa: BLE001 - a failing policy is a result
-        termination, error = "policy_error", _error_text(e, "policy.reset()")
-    while termination is None:
-        try:
-            actions = _action_chunk(policy.act(obs), u, replan_steps)
-        except Exception as e:  # noqa: BLE001
-            termination, error = "policy_error", _error_text(e, "policy.act()")
-            break
-        for action in actions:
-            try:
-                obs, _, terminated, truncated, info = env.step(action)
-            except SimulationInstabilityError as e:
-                termination, error = "sim_unstable", str(e)
-                break
-            steps += 1
-            if on_step is not None:
-                on_step(obs, info)
-            if bool(terminated[0]) or bool(truncated[0]):
-                termination = ("success" if info_bool(info, "task_success") else
-                               "dropped" if info_bool(info, "dropped") else "timeout")
-                break
+    ep = rollout(env, policy, int(episode["seed"]), options=options, replan_steps=replan_steps,
+                 observers=[Callback()] if on_step is not None else [], until="episode")
+    info = ep.info
     material = u.object_material(u.target_instance)
     e = material["youngs_modulus"]  # None for a rigid twin
     receipt = {"youngs_modulus": None if e is None else float(e), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
-               "privileged": privileged}
-    success = termination == "success"
+               "privileged": ep.privileged}
+    success = ep.termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
            "tactile_model": tactile_model(u.obs_mode),
-           "termination": termination, "error": error,
+           "termination": ep.termination, "error": ep.error,
            "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
-           "dropped": info_bool(info, "dropped"), "steps": steps, "r_max": float(env.r_max),
+           "dropped": info_bool(info, "dropped"), "steps": ep.steps, "r_max": float(env.r_max),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
     return _seal(rec)

@@ -19,8 +19,7 @@ motion-planning format) or ``pd_ee_pose`` (the paper's absolute TCP pose), eithe
 from __future__ import annotations
 
 from ..calibration.cards import CalibrationCard
-from ..observations import info_bool
-from .pick_place import DEFAULT_PLANNER, draw_closure, mode_actions, plan_pick_place
+from .pick_place import DEFAULT_PLANNER
 
 
 SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
@@ -36,36 +35,35 @@ def expert_card(env) -> CalibrationCard:
 
 def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = None, planner: str = DEFAULT_PLANNER,
           strict: bool = False):
-    """ManiSkill motion-planning solution of a SoftVT task (module docstring).
+    """ManiSkill motion-planning solution of a SoftVT task (module docstring): a rollout of the
+    scripted expert (:class:`~mani_skill_softvt.expert.policy.ScriptedExpertPolicy`) to the end of
+    its plan.
 
     ``closure``: the gripper closure (default: drawn from the card's envelope with ``seed``);
     ``planner``: "mplib" (falls back to the Cartesian plan where mplib finds no path, unless
     ``strict``) or "cartesian". The closure and the planner that produced the plan go to the
     recorder's episode metadata when ``env`` is a :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`.
     """
+    from ..rollout import Observer, rollout
     from .planner import PlanningError
+    from .policy import ScriptedExpertPolicy
 
-    env.reset(seed=seed)
-    if closure is None:
-        closure = draw_closure(expert_card(env), 0 if seed is None else int(seed))
-    try:
-        plan = plan_pick_place(env, closure, planner, strict=strict)
-    except PlanningError as e:
+    class Show(Observer):
+        def on_step(self, env, action, obs, info):
+            env.unwrapped.render_human()
+
+    expert = ScriptedExpertPolicy(planner=planner, closure=closure, strict=strict)
+    # As ManiSkill's solutions do, the plan runs to its end past the first success (release,
+    # retreat, wait): a replay converted into another control mode lags the original by a few
+    # ticks, and must still end at rest in the target. A failure (a drop) or the time limit ends it.
+    episode = rollout(env, expert, seed, until="plan", observers=[Show()] if vis else [])
+    if isinstance(episode.exception, PlanningError):
         if debug:
-            print(f"no motion plan for seed {seed}: {e}")
+            print(f"no motion plan for seed {seed}: {episode.exception}")
         return -1
+    if episode.exception is not None:  # the simulation or the expert itself failed: not a result here
+        raise episode.exception
     metadata = getattr(env, "episode_metadata", None)
     if metadata is not None:
-        metadata.update(closure=float(closure), planner=plan.planner)
-    result = None
-    for _, action in mode_actions(env, plan):
-        result = env.step(action)
-        if vis:
-            env.unwrapped.render_human()
-        _, _, _, truncated, info = result
-        # As ManiSkill's solutions do, the plan runs to its end past the first success (release,
-        # retreat, wait): a replay converted into another control mode lags the original by a few
-        # ticks, and must still end at rest in the target. A failure (a drop) or the time limit ends it.
-        if bool(truncated) or info_bool(info, "fail"):
-            break
-    return result
+        metadata.update(closure=float(expert.closure), planner=expert.plan.planner)
+    return episode.last_step
