@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Baselines campaign, step 1 (docs/baselines.md): Object-Soft expert demos, resumable across sessions.
+#   bash scripts/campaign_demos.sh [NUM_PER_TASK=100] [WORKERS=1] [ROUND=10]
+# Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
+# tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
+# R_max histogram) are copied back into demos/object_soft/ for the commit. On a machine without
+# the episodes, the committed QC logs are copied out first and `generate` records their accepted
+# episodes again. Rounds of ROUND more demos per task keep the tasks level if a session ends early.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}
+export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
+PY=${PY:-.venv/bin/python}
+store=$SOFTVT_DEMOS_DIR/object_soft
+mkdir -p "$store"
+if [ -d demos/object_soft ]; then cp -rn demos/object_soft/. "$store/"; fi  # -n: never over the store's newer logs
+sync_back() {
+  mkdir -p demos/object_soft
+  (cd "$store" && find . \( -name manifest.json -o -name qc_report.json -o -name stats.json -o -name r_max_hist.png \
+      -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/object_soft/")
+}
+trap sync_back EXIT
+for ((n = ROUND; n < NUM + ROUND; n += ROUND)); do
+  k=$(( n < NUM ? n : NUM ))
+  "$PY" -m mani_skill_softvt.demos generate --suite object_soft --num "$k" --workers "$WORKERS" --out "$SOFTVT_DEMOS_DIR"
+  "$PY" -m mani_skill_softvt.demos stats --suite object_soft --out "$SOFTVT_DEMOS_DIR" || true
+  sync_back
+done
