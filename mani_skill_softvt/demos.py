@@ -74,7 +74,7 @@ def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, 
     from .evaluation.wrapper import make_env
 
     demo_set = DemoSet(out, suite)
-    qc = {r["seed"]: r for r in demo_set.read_qc(task_id)}  # a seed's latest verdict counts
+    qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     seeds = [train_seed(task_id, i) for i in range(num)]
     env = None
     for seed in seeds:
@@ -107,7 +107,7 @@ def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
     from .data.record import episode_paths, quiet_maniskill_logger
 
     demo_set = DemoSet(out, suite)
-    qc = {r["seed"]: r for r in demo_set.read_qc(task_id)}
+    qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
     if accepted:
         final_h5, final_json = episode_paths(demo_set.trajectory(task_id))
@@ -178,7 +178,7 @@ def stats(suite: str, out: Path) -> dict:
     demo_set = DemoSet(out, suite)
     rows, all_r, corrupt = [], [], []
     for t in range(NUM_TASKS):
-        qc = demo_set.read_qc(t)
+        qc = demo_set.verdicts(t)
         if not qc:
             continue
         # From the QC log, so an interrupted run (episodes recorded, not yet merged) counts too.

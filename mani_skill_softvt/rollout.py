@@ -52,6 +52,7 @@ class Episode:
     termination: str | None = None
     error: str | None = None  # the message of a policy_error or sim_unstable
     exception: BaseException | None = None
+    failed_in: str | None = None  # "policy.reset()", "policy.act()" or "env.step()"
     privileged: bool = False  # the policy planned on the env
     obs: object = None  # the last observation and info (the reset's before any step)
     info: dict = field(default_factory=dict)
@@ -114,19 +115,21 @@ def rollout(env, policy, seed: int | None = None, *, options: dict | None = None
     try:
         policy.reset(getattr(u, "instruction", ""), seed)
     except Exception as e:  # noqa: BLE001 - a failing policy is a result
-        ep.termination, ep.error, ep.exception = "policy_error", _error_text(e, "policy.reset()"), e
+        ep.termination, ep.error, ep.exception, ep.failed_in = "policy_error", _error_text(e, "policy.reset()"), e, \
+            "policy.reset()"
         return ep
     while ep.termination is None:
         try:
             actions = action_chunk(policy.act(obs), u, replan_steps)
         except Exception as e:  # noqa: BLE001
-            ep.termination, ep.error, ep.exception = "policy_error", _error_text(e, "policy.act()"), e
+            ep.termination, ep.error, ep.exception, ep.failed_in = "policy_error", _error_text(e, "policy.act()"), e, \
+                "policy.act()"
             break
         for action in actions:
             try:
                 result = env.step(action)
             except SimulationInstabilityError as e:
-                ep.termination, ep.error, ep.exception = "sim_unstable", str(e), e
+                ep.termination, ep.error, ep.exception, ep.failed_in = "sim_unstable", str(e), e, "env.step()"
                 break
             obs, _, terminated, truncated, info = result
             ep.steps += 1
@@ -147,7 +150,8 @@ class EvaluatorTrace(Observer):
     """The evaluator-side stream of an episode, in one format: per state (the reset's, if the
     rollout reset, then one per step) the instructed object's nodes, D_t, centroid and lowest
     point, every object's centroid and R_t (if a DSR wrapper reports it); per step the grasp and
-    drop flags (if the env reports them), both pad forces, the jaw width and the TCP pose.
+    drop flags (False where the env does not report them), both pad forces, the jaw width and the
+    TCP pose.
     Evaluator-only: it reads the env, never an observation.
 
     ``object_name``: the object followed (default: the instructed one, else the scene's first).
@@ -180,8 +184,7 @@ class EvaluatorTrace(Observer):
             v["deformation_ratio"].append(float(info["deformation_ratio"]))
         if step:
             for flag in ("is_grasped", "dropped"):
-                if flag in info:
-                    v[flag].append(info_bool(info, flag))
+                v[flag].append(info_bool(info, flag))  # False where the env does not report it
             pads = u.pad_forces()
             v["pad_force"].append([pads["left"], pads["right"]])
             v["gripper_width"].append(u.gripper_width)

@@ -9,11 +9,20 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}
+(( NUM > 0 && WORKERS > 0 && ROUND > 0 )) || { echo "usage: $0 [NUM>0] [WORKERS>0] [ROUND>0]" >&2; exit 2; }
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 PY=${PY:-.venv/bin/python}
 store=$SOFTVT_DEMOS_DIR/object_soft
 mkdir -p "$store"
-if [ -d demos/object_soft ]; then cp -rn demos/object_soft/. "$store/"; fi  # -n: never over the store's newer logs
+# The committed small products go to the store where it lacks them or holds shorter logs (a store
+# left by an older session); the store's own, longer logs are kept.
+if [ -d demos/object_soft ]; then
+  (cd demos/object_soft && find . -type f -print0) | while IFS= read -r -d '' f; do
+    if [ ! -e "$store/$f" ] || [ "$(wc -l < "demos/object_soft/$f")" -gt "$(wc -l < "$store/$f")" ]; then
+      mkdir -p "$(dirname "$store/$f")" && cp "demos/object_soft/$f" "$store/$f"
+    fi
+  done
+fi
 sync_back() {
   mkdir -p demos/object_soft
   (cd "$store" && find . \( -name manifest.json -o -name qc_report.json -o -name stats.json -o -name r_max_hist.png \

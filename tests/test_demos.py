@@ -75,6 +75,8 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
         assert all(np.array_equal(f[f"traj_0/env_states/actors/{k}"][()], v) for k, v in recorded.items())
     generate("object_rigid", [3], 1, tmp_path)  # now complete: nothing recorded again
     assert len(demo_set.read_qc(3)) == 2
+    summary = stats("object_rigid", tmp_path)  # one episode, however often it was logged
+    assert (summary["generated"], summary["accepted"]) == (1, 1)
 
 
 def test_stored_states_replay_the_actions_bit_for_bit(dataset):

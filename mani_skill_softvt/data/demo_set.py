@@ -64,8 +64,13 @@ class DemoSet:
         return self.episode_dir(task_id) / "qc.jsonl"
 
     def read_qc(self, task_id: int) -> list[dict]:
-        """The screening records of a task's generated episodes (empty if none)."""
+        """The screening records of a task's generated episodes, as logged (empty if none)."""
         return read_jsonl(self.qc_log(task_id))
+
+    def verdicts(self, task_id: int) -> list[dict]:
+        """One screening record per seed, its latest (an episode recorded again on another machine
+        appends a second line), in the order the seeds were first logged."""
+        return list({r["seed"]: r for r in self.read_qc(task_id)}.values())
 
     def trajectory(self, task_id: int) -> Path:
         """The task's accepted episodes, ManiSkill trajectory file (its ``.json`` sits beside it)."""

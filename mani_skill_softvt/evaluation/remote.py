@@ -64,6 +64,8 @@ QPOS_KEY, TCP_POSE_KEY, PROMPT_KEY = "observation/qpos", "observation/tcp_pose_w
 def tactile_wire_key(side: str, suffix: str = "") -> str:
     """Wire key of one finger's tactile image (``suffix`` "") or of its ``depth`` / marker field."""
     return f"observation/tactile_{side}" + (f"_{suffix}" if suffix else "")
+
+
 EPISODE_RESET, EPISODE_SEED = "episode/reset", "episode/seed"
 
 

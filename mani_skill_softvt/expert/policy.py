@@ -47,19 +47,30 @@ class ScriptedExpertPolicy(Policy):
         self.plan = plan_pick_place(self.env, self.closure, self.planner, strict=self.strict)
         self.name = f"scripted_expert[{self.plan.planner}]"  # the planner that actually ran (receipts)
         self._actions = (a for _, a in mode_actions(self.env, self.plan))  # in the env's control mode
-        self._next = next(self._actions, None)  # one ahead: the plan's actions do not depend on the steps
         self._last = None
+        self._advance()
+
+    def _advance(self) -> None:
+        """Compute the next action one ahead (the plan's actions do not depend on the steps), so that
+        ``done`` is known after the last one; an error (a Cartesian plan's IK in joint space) is
+        kept and raised by the ``act`` whose chunk would hold that action."""
+        try:
+            self._next, self._error = next(self._actions, None), None
+        except Exception as e:  # noqa: BLE001 - raised in act(), at the step it belongs to
+            self._next, self._error = None, e
 
     @property
     def done(self) -> bool:
         """The plan's actions are all handed out."""
-        return self._next is None
+        return self._next is None and self._error is None
 
     def act(self, obs) -> np.ndarray:
         out = []
-        while len(out) < self.chunk and self._next is not None:
+        while len(out) < self.chunk and (self._next is not None or self._error is not None):
+            if self._error is not None:  # the chunk that holds it fails as a whole
+                raise self._error
             out.append(self._next)
-            self._next = next(self._actions, None)
+            self._advance()
         if not out:  # plan finished: hold the last action
             out = [self._last]
         self._last = out[-1]

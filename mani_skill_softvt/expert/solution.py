@@ -52,18 +52,20 @@ def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = Non
         def on_step(self, env, action, obs, info):
             env.unwrapped.render_human()
 
-    expert = ScriptedExpertPolicy(planner=planner, closure=closure, strict=strict)
+    # One action per call: an expert that fails mid-plan (IK of a Cartesian plan in joint space) has
+    # stepped every action before the failure, as a solution stepping its plan does.
+    expert = ScriptedExpertPolicy(chunk=1, planner=planner, closure=closure, strict=strict)
     # As ManiSkill's solutions do, the plan runs to its end past the first success (release,
     # retreat, wait): a replay converted into another control mode lags the original by a few
     # ticks, and must still end at rest in the target. A failure (a drop) or the time limit ends it.
-    episode = rollout(env, expert, seed, until="plan", observers=[Show()] if vis else [])
-    if isinstance(episode.exception, PlanningError):
+    episode = rollout(env, expert, seed, replan_steps=1, until="plan", observers=[Show()] if vis else [])
+    metadata = getattr(env, "episode_metadata", None)
+    if metadata is not None and expert.plan is not None:  # whatever happened after planning
+        metadata.update(closure=float(expert.closure), planner=expert.plan.planner)
+    if isinstance(episode.exception, PlanningError) and episode.failed_in == "policy.reset()":
         if debug:
             print(f"no motion plan for seed {seed}: {episode.exception}")
         return -1
     if episode.exception is not None:  # the simulation or the expert itself failed: not a result here
         raise episode.exception
-    metadata = getattr(env, "episode_metadata", None)
-    if metadata is not None:
-        metadata.update(closure=float(expert.closure), planner=expert.plan.planner)
     return episode.last_step
