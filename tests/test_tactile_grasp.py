@@ -92,6 +92,19 @@ def held_frames(asset_id: str, closures) -> list[dict]:
     return out
 
 
+# The simulated finger pad is a rigid face of 17.5 x 18.5 mm and the gel's view 18.9 x 14.2 mm: no
+# contact is larger than their overlap. A patch within a few pixels' rim of it (5 %) covers the pad.
+PAD_COVERED = 0.95
+
+
+def covers_pad(mask: np.ndarray) -> bool:
+    """Whether a patch covers the part of the pad's face in the gel's view (its area is the pad's)."""
+    from mani_skill_softvt.tasks import constants as TC
+
+    pad = min(C.FOV_WIDTH, 2 * TC.FINGERTIP_HALF_EXTENTS[0]) * min(C.FOV_HEIGHT, 2 * TC.FINGERTIP_HALF_EXTENTS[2])
+    return bool(mask.sum() * C.PIXEL_SIZE ** 2 >= PAD_COVERED * pad)
+
+
 def radial_dilation(frame) -> float:
     """Mean outward motion (px) of the markers about the patch's centroid: the dilation, without
     the shear (a translation moves as many markers towards the centroid as away from it)."""
@@ -116,8 +129,6 @@ ASSETS = sorted(p.stem for p in CALIBRATION_DIR.glob("soft_*.json"))
 # reading of pd_ee_pose (before EE_ORIENTATION_AXIS_ANGLE), and before the twins' rest-pose tie rule
 # (the sphere and cylinder twins rest on other faces). Since both changes they fail as listed; they run, and are reported as expected failures until re-derived (docs/limitations.md).
 REDERIVE_AFTER_ORIENTATION_FIX = {
-    ("soft_pastry011", False): "left pad: patch area 1.5e-4, 2.5e-4, 2.5e-4, 2.5e-4 m^2 at 1.0-8.7 N (Spearman 0.4): "
-                               "the patch fills the gel from the second closure on",
     "stiffness": "soft ball's peak indentation per newton is not 1.5x below its twin's",
     ("markers", "soft_stw_sphere_hq"): "the marker shear does not follow the contact's motion within 20 %",
 }
@@ -171,9 +182,16 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
         if not twin:
             # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
             # 1 deg, different in each grasp): its patch area follows the tilt as much as the force.
+            # A patch that covers the pad (a flat side pressed firmly: pastry011 from its second
+            # closure on) has the pad's area whatever the force. It only has to be no smaller
+            # than the others; the area grows with the force over those.
             still = [k for k, s in enumerate(snaps) if s["turn_deg"] <= PIVOT_LIMIT_DEG]
-            checks.append(("area", [forces[k] for k in still], [areas[k] for k in still]))
-        print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, dilation "
+            filled = [k for k in still if covers_pad(snaps[k][side]["frame"].contact)]
+            growing = [k for k in still if k not in filled]
+            if len(growing) > 1:
+                checks.append(("area", [forces[k] for k in growing], [areas[k] for k in growing]))
+            assert all(areas[f] >= areas[k] for f in filled for k in growing), (areas, filled)
+        print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, area {np.round(np.array(areas) * 1e6)} mm2, dilation "
               f"{np.round(dilations, 2)} px, turn {[round(s['turn_deg'], 1) for s in snaps]} deg, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
         for name, at, values in checks:
             levels, means = force_levels(at, values)
