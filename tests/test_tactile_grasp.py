@@ -34,9 +34,6 @@ PIVOT_LIMIT_DEG = 3.0
 # The gripper's force limit (10 N) binds on a rigid twin at the firm end of the envelope: two
 # grasps then press with the same force to within a few mN. Forces this close are one level.
 FORCE_TIE = 0.01  # relative
-# Sub-pixel marker tracking (a dot's intensity centroid) resolves about a tenth of a pixel (6 um):
-# a firm grasp's creep is of that size, so its markers are compared to the contact within it.
-MARKER_TRACKING_PX = 0.1
 # Grasps at one force level press the same volume F / K into the gel; what they show differs only
 # by where the patch sits and how it is tilted (1 % measured on the pastry010 twin at 10.0 N).
 SAME_FORCE_AGREEMENT = 0.10  # relative
@@ -133,6 +130,9 @@ ASSETS = sorted(p.stem for p in CALIBRATION_DIR.glob("soft_*.json"))
 # (the sphere and cylinder twins rest on other faces). Since both changes they fail as listed; they run, and are reported as expected failures until re-derived (docs/limitations.md).
 REDERIVE_AFTER_ORIENTATION_FIX = {
     "stiffness": "soft ball's peak indentation per newton is not 1.5x below its twin's",
+    ("markers", "soft_stw_sphere_hq"): "the firm grasp's contact creeps 0.17 px (10 um) over the hold and its markers "
+                                       "differ from it by 0.06 px, 38 %: a 20 % bound on a motion this small needs an "
+                                       "absolute part derived from how the markers sample the contact",
 }
 
 
@@ -185,14 +185,15 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
             # A rigid flat face meets the gel at whatever tilt PhysX leaves it in the pinch (about
             # 1 deg, different in each grasp): its patch area follows the tilt as much as the force.
             # A patch that covers the pad (a flat side pressed firmly: pastry011 from its second
-            # closure on) has the pad's area whatever the force. It only has to be no smaller
-            # than the others; the area grows with the force over those.
+            # closure on, the cube at every one) has the pad's area whatever the force: once
+            # covered it stays covered at every firmer grasp; the area grows with the force over
+            # the grasps that do not cover it.
             still = [k for k, s in enumerate(snaps) if s["turn_deg"] <= PIVOT_LIMIT_DEG]
             filled = [k for k in still if covers_pad(snaps[k][side]["frame"].contact)]
             growing = [k for k in still if k not in filled]
             if len(growing) > 1:
                 checks.append(("area", [forces[k] for k in growing], [areas[k] for k in growing]))
-            assert all(areas[f] >= areas[k] for f in filled for k in growing), (areas, filled)
+            assert all(forces[f] > forces[k] for f in filled for k in growing), (forces, filled)
         print(f"{asset_id} {'twin' if twin else 'soft'} {side}: F {np.round(forces, 2)} N, area {np.round(np.array(areas) * 1e6)} mm2, dilation "
               f"{np.round(dilations, 2)} px, turn {[round(s['turn_deg'], 1) for s in snaps]} deg, patch/contact {min(ratios):.2f}-{max(ratios):.2f}, inside >= {min(insides):.0%}")
         for name, at, values in checks:
@@ -214,18 +215,26 @@ def test_every_held_grasp_shows_its_contact_patch_on_both_fingers(asset_id, twin
         # (1 - nu^2) against the rigid pad), within one FEM cell of the hex mesh. Lightest grasp
         # only: Hertz needs b << R (at the firmest, 2b would exceed R). The faceted rigid twin
         # meets the gel with a facet or an edge at whatever tilt PhysX leaves it, like the ball's.
-        stripe_width_within_a_cell_of_hertz(asset_id, left[0], snaps[0]["left"]["force"])
+        widths = [stripe_width(asset_id, f, s["left"]["force"]) for f, s in zip(left, snaps)]
+        # A line contact widens with the force (Hertz: as sqrt(F)); at this resolution the FEM
+        # widens more slowly than Hertz past the lightest grasp (8.8-14.1 mm against 7-23 mm).
+        assert all(b > a for a, b in zip(widths, widths[1:])), widths
     if asset_id == "soft_stw_cube_hq" and not twin:
         assert shape(left[-1].contact)[1] > 0.85
 
 
-def stripe_width_within_a_cell_of_hertz(asset_id: str, frame, force: float) -> None:
+def stripe_width(asset_id: str, frame, force: float) -> float:
+    """The width (m) of an upright cylinder's contact stripe, checked: along the image rows (the
+    cylinder's axis), the whole height of the view, and at the lightest grasp (``check_hertz``)
+    within one FEM cell across the stripe of the Hertz line contact's."""
     from mani_skill_softvt.assets.build import DEFAULT_RESOLUTION
     from mani_skill_softvt.assets.cards import load_card
     from mani_skill_softvt.tasks import constants as TC
 
     card = load_card(asset_id)
-    radius, cell = card.dimensions[0] / 2, max(card.dimensions) / DEFAULT_RESOLUTION
+    dims = np.asarray(card.dimensions)
+    # The hex grid's cell across the diameter (box_tetmesh: cells in proportion to the extent).
+    radius, cell = dims[0] / 2, dims[0] / round(dims[0] / dims.max() * DEFAULT_RESOLUTION)
     pad_height = 2 * TC.FINGERTIP_HALF_EXTENTS[2]
     e_star = card.youngs_modulus / (1 - card.poisson_ratio ** 2)
     hertz = 2 * np.sqrt(4 * force * radius / (np.pi * pad_height * e_star))
@@ -235,7 +244,9 @@ def stripe_width_within_a_cell_of_hertz(asset_id: str, frame, force: float) -> N
     print(f"{asset_id}: stripe {width * 1e3:.1f} mm wide at {force:.2f} N, Hertz {hertz * 1e3:.1f} mm, cell {cell * 1e3:.1f} mm")
     assert abs(axes[1, 1]) > 0.95  # along the image rows: the pad's vertical, the cylinder's axis
     assert np.ptp(rows) + 1 >= 0.95 * C.IMAGE_HEIGHT  # the whole height of the view
-    assert abs(width - hertz) <= cell, (width, hertz, cell)
+    if hertz < radius / 2:  # Hertz holds for b << R (here b < R / 4): the lightest grasp only
+        assert abs(width - hertz) <= cell, (width, hertz, cell)
+    return float(width)
 
 
 def test_stiffness_shows_soft_ball_spreads_where_its_rigid_twin_digs_in(request):
@@ -293,15 +304,14 @@ def hold_shear(asset_id: str, closure: float) -> tuple[np.ndarray, np.ndarray]:
 def test_markers_follow_the_contact_and_a_loose_grasp_slips_where_a_firm_one_holds(asset_id, request):
     """A loose grasp (the card's g_min: held, but only just) creeps down the pads under the
     object's weight; a firm one (g_max) barely moves. The gel is stuck to the contact, so the
-    markers under it move with it: within 20 % of the contact's own in-plane motion, or within
-    what marker tracking resolves where that motion is tiny (a firm grasp's 10 um creep)."""
+    markers under it move with it: within 20 % of the contact's own in-plane motion."""
     _expect_failure_until_rederived(request, ("markers", asset_id))
     card = json.loads((CALIBRATION_DIR / f"{asset_id}.json").read_text())
     (loose_c, loose_m), (firm_c, firm_m) = (hold_shear(asset_id, card[k]) for k in ("g_min", "g_max"))
     print(f"{asset_id}: loose contact {np.round(loose_c, 2)} px, markers {np.round(loose_m, 2)}; "
           f"firm contact {np.round(firm_c, 2)}, markers {np.round(firm_m, 2)}")
     for contact, markers in ((loose_c, loose_m), (firm_c, firm_m)):
-        assert np.linalg.norm(markers - contact) <= max(0.2 * np.linalg.norm(contact), MARKER_TRACKING_PX)
+        assert np.linalg.norm(markers - contact) <= 0.2 * np.linalg.norm(contact)
     # Incipient slip: gravity drags the loose grasp's contact down (+row: the image's down is the
     # world's down while held) several times farther than the firm one's.
     assert loose_c[1] > 0 and np.linalg.norm(loose_m) > 3.0 * np.linalg.norm(firm_m)
