@@ -5,7 +5,8 @@
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
 # R_max histogram) are copied back into demos/object_soft/ for the commit. On a machine without
 # the episodes, the committed QC logs are copied out first and `generate` records their accepted
-# episodes again. Rounds of ROUND more demos per task keep the tasks level if a session ends early.
+# episodes again. Rounds of ROUND more seeds per task keep the tasks level if a session ends early.
+# NUM counts training seeds per task, not accepted demos: a task that rejects some needs a larger NUM.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}
