@@ -28,8 +28,8 @@ from . import __version__
 from .evaluation.policies import BUILTIN, load_policy
 from .policy import is_privileged
 from .evaluation.remote import (ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, PROMPT_KEY, QPOS_KEY, TACTILE_MARKERS,
-                                TACTILE_SIDES, TCP_POSE_KEY, tactile_wire_key)
-from .observations import QPOS, TCP_POSE, camera_key, nest, tactile_key
+                                TCP_POSE_KEY, tactile_wire_key)
+from .observations import QPOS, SIDES, TCP_POSE, camera_key, nest, tactile_key
 
 DEFAULT_PORT = 8000  # openpi's default
 
@@ -52,8 +52,8 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
     instruction = str(request[PROMPT_KEY])
     flat = {QPOS: _batched(request[QPOS_KEY], np.float32), TCP_POSE: _batched(request[TCP_POSE_KEY], np.float32),
             **{camera_key(cam): _batched(request[key], np.uint8) for key, cam in CAMERAS.items()}}
-    if tactile_wire_key(TACTILE_SIDES[0]) in request:
-        for side in TACTILE_SIDES:
+    if tactile_wire_key(SIDES[0]) in request:
+        for side in SIDES:
             flat[tactile_key(side, "rgb")] = _batched(request[tactile_wire_key(side)], np.uint8)
             for name, field in TACTILE_MARKERS.items():
                 flat[tactile_key(side, field)] = _batched(request[tactile_wire_key(side, name)], np.float32)

@@ -24,7 +24,6 @@ from ..physics.transforms import down_rotvec
 from ..tasks.robot import base_frame_pose
 from .config import DPConfig
 
-FINGERS = SIDES
 CAMERAS = dict(zip(("base", "hand"), ENV_CAMERAS))  # input name -> the env's camera
 DOWN_ROTVEC = down_rotvec(0.0)
 
@@ -65,16 +64,16 @@ def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
     for name, cam in CAMERAS.items():
         out[name] = resize_image(np.asarray(flat[camera_key(cam)]), cfg.camera_size)
     if cfg.tactile:
-        for side in FINGERS:
+        for side in SIDES:
             if tactile_key(side, "rgb") not in flat:
                 raise ValueError(f"variant {cfg.variant} needs tactile observations: use obs_mode rgb+tactile")
             depth = flat.get(tactile_key(side, "depth"))
             out[f"tactile_{side}"] = tactile_image(np.asarray(flat[tactile_key(side, "rgb")]), depth, cfg)
         out["markers"] = np.stack([marker_displacement(*(flat[tactile_key(side, f)] for f in MARKER_FIELDS))
-                                   for side in FINGERS])
+                                   for side in SIDES])
     return out
 
 
 def image_keys(cfg: DPConfig) -> list[str]:
     """The image streams of the variant, each with its own encoder."""
-    return list(CAMERAS) + ([f"tactile_{s}" for s in FINGERS] if cfg.tactile else [])
+    return list(CAMERAS) + ([f"tactile_{s}" for s in SIDES] if cfg.tactile else [])

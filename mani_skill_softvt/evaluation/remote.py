@@ -56,7 +56,6 @@ DEFAULT_CONNECT_TIMEOUT = 10.0  # s: TCP + websocket handshake + the server's me
 DEFAULT_REPLY_TIMEOUT = 120.0
 # Wire key -> the env's camera (LIBERO's names: third-person image, wrist image).
 CAMERAS = dict(zip(("observation/image", "observation/wrist_image"), ENV_CAMERAS))
-TACTILE_SIDES = SIDES
 TACTILE_MARKERS = dict(zip(("markers_initial", "markers_current"), MARKER_FIELDS))  # wire suffix -> env field
 QPOS_KEY, TCP_POSE_KEY, PROMPT_KEY = "observation/qpos", "observation/tcp_pose_world", "prompt"
 
@@ -88,7 +87,7 @@ def to_openpi_observation(obs: dict, instruction: str) -> dict:
     out = {key: np.ascontiguousarray(lookup(obs, camera_key(cam))) for key, cam in CAMERAS.items()}
     out.update({"observation/state": base_frame_state(tcp_pose, qpos[-2:]), QPOS_KEY: qpos,
                 TCP_POSE_KEY: tcp_pose, PROMPT_KEY: str(instruction)})
-    for side in TACTILE_SIDES if "tactile" in obs else ():
+    for side in SIDES if "tactile" in obs else ():
         out[tactile_wire_key(side)] = np.ascontiguousarray(lookup(obs, tactile_key(side, "rgb")))
         out[tactile_wire_key(side, "depth")] = np.ascontiguousarray(lookup(obs, tactile_key(side, "depth")))
         for name, field in TACTILE_MARKERS.items():
