@@ -2,6 +2,7 @@
 
     python -m mani_skill_softvt.demos generate --suite object_soft --tasks 3 --num 2
     python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --workers 2
+    python -m mani_skill_softvt.demos generate --suite object_soft --accepted 100 --num 200   # 100 accepted a task
     python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --ray auto   # on a Ray cluster
     python -m mani_skill_softvt.demos render --suite object_soft --tasks 3 --obs-mode rgb+tactile
     python -m mani_skill_softvt.demos stats --suite object_soft
@@ -68,30 +69,39 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
     return problems, ep
 
 
-def _generate_task(suite: str, task_id: int, num: int, out: Path, planner: str, control_mode: str, queue) -> dict:
+def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out: Path, planner: str,
+                   control_mode: str, queue) -> dict:
+    """Record one task's demos: the first ``num`` training seeds, or with ``accepted`` training seeds
+    in order until that many are accepted (at most ``num`` seeds). The progress queue gets one per
+    seed, or with ``accepted`` one per accepted demo."""
     from .data.seeds import train_seed
     from .data.trajectory import episode_json_line
     from .evaluation.wrapper import make_env
 
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
-    seeds = [train_seed(task_id, i) for i in range(num)]
+    seeds, kept = [], 0
     env = None
-    for seed in seeds:
-        if seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists()):
+    for i in range(num):
+        if accepted is not None and kept >= accepted:
+            break
+        seed = train_seed(task_id, i)
+        seeds.append(seed)
+        if not (seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists())):
+            # New, or accepted but its file is not here: the QC logs are committed, the demos are
+            # not, so a fresh checkout records the accepted episodes again (its new verdict is appended).
+            if env is None:
+                env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
+                demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)
+            t0 = time.perf_counter()
+            problems, ep = record_demo(env, seed, demo_set.episode_file(task_id, seed), planner)
+            line = json.loads(episode_json_line(ep, problems))
+            line["wall_s"] = round(time.perf_counter() - t0, 2)
+            append_jsonl(demo_set.qc_log(task_id), line)
+            qc[seed] = line
+        kept += bool(qc[seed]["accepted"])
+        if accepted is None or qc[seed]["accepted"]:
             queue.put(1)
-            continue
-        # New, or accepted but its file is not here: the QC logs are committed, the demos are not,
-        # so a fresh checkout records the accepted episodes again (its new verdict is appended).
-        if env is None:
-            env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
-            demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        problems, ep = record_demo(env, seed, demo_set.episode_file(task_id, seed), planner)
-        line = json.loads(episode_json_line(ep, problems))
-        line["wall_s"] = round(time.perf_counter() - t0, 2)
-        append_jsonl(demo_set.qc_log(task_id), line)
-        queue.put(1)
     if env is not None:
         env.close()
     return _merge_task(suite, task_id, seeds, out)
@@ -118,12 +128,17 @@ def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
         os.replace(tmp_h5, final_h5)
     rejected = {s: qc[s]["problems"] for s in seeds if s in qc and not qc[s]["accepted"]}
     return {"task_id": task_id, "generated": sum(s in qc for s in seeds), "accepted": len(accepted), "rejected": rejected,
+            "train_seeds": [seeds[0], seeds[-1]] if seeds else None,
             "seconds_per_demo": float(np.mean([qc[s]["wall_s"] for s in seeds if s in qc])) if qc else None}
 
 
 def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1,
-             ray_address: str | None = None, planner: str | None = None, control_mode: str = "pd_ee_pose") -> dict:
-    """Record ``num`` expert demos per task, one work item per task (local processes or Ray tasks).
+             ray_address: str | None = None, planner: str | None = None, control_mode: str = "pd_ee_pose",
+             accepted: int | None = None) -> dict:
+    """Record expert demos per task, one work item per task (local processes or Ray tasks): the
+    first ``num`` training seeds, or with ``accepted`` training seeds in order until that many
+    demos are accepted, drawing at most ``num`` seeds (a task whose expert fails on some seeds
+    still ends with ``accepted`` demos: the paper's 100 per task).
 
     ``planner`` ("mplib" or "cartesian", default :data:`~mani_skill_softvt.expert.pick_place.DEFAULT_PLANNER`)
     joins the expert's waypoints; each episode records the planner that produced it.
@@ -136,10 +151,11 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     """
     from tqdm import tqdm
 
-    from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
     from .expert.pick_place import DEFAULT_PLANNER
     from .physics.constants import physics_signature, signature_mismatch
 
+    if accepted is not None and not 1 <= accepted <= num:
+        raise ValueError(f"accepted={accepted}: ask for 1 to num ({num}) accepted demos per task")
     planner = planner or DEFAULT_PLANNER
     demo_set = DemoSet(out, suite)
     if demo_set.manifest.exists():  # resuming: the new episodes must come from the same physics
@@ -152,23 +168,39 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
         if stale:
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
-    atomic_write_json(demo_set.manifest, {
-        "suite": suite, "expert_planner": planner, "control_mode": control_mode, "physics": physics_signature(), "train_seeds": {t: [train_seed(t, 0), train_seed(t, num - 1)] for t in tasks},
-        "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
-        "note": "training and evaluation seed ranges are disjoint by construction"})
-    bar = tqdm(total=len(tasks) * num, desc=f"demos {suite}", unit="demo")
+    # Written first (a resumed run checks its physics), and again with the seeds actually drawn.
+    _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None if accepted else num)
+    bar = tqdm(total=len(tasks) * (accepted or num), desc=f"demos {suite}", unit="accepted demo" if accepted else "seed")
     results = []
     out_abs = Path(out).resolve()  # workers (Ray's above all) need not share our working directory
-    for kind, value in run_tasks(_generate_task, [(suite, t, num, out_abs, planner, control_mode) for t in tasks], workers,
-                                 ray_address):
+    for kind, value in run_tasks(_generate_task, [(suite, t, num, accepted, out_abs, planner, control_mode) for t in tasks],
+                                 workers, ray_address):
         if kind == "message":
             bar.update(value)
         else:
             results.append(value)
     bar.close()
+    _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None)
     report = {"suite": suite, "tasks": sorted(results, key=lambda r: r["task_id"])}
     atomic_write_json(demo_set.qc_report, report)
     return report
+
+
+def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_mode: str, physics: dict,
+                    num: int | None) -> None:
+    """``manifest.json``: per task the training-seed range generated (from its QC log, or the first
+    ``num`` if more) and the ID evaluation range, which never overlap."""
+    from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
+
+    def last_index(t: int) -> int:
+        logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
+        return max(logged + [(num or 0) - 1, 0])
+
+    atomic_write_json(demo_set.manifest, {
+        "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, "physics": physics,
+        "train_seeds": {t: [train_seed(t, 0), train_seed(t, last_index(t))] for t in tasks},
+        "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
+        "note": "training and evaluation seed ranges are disjoint by construction"})
 
 
 def stats(suite: str, out: Path) -> dict:
@@ -344,7 +376,10 @@ def main(argv=None):
     g = sub.add_parser("generate", help="record expert demonstrations")
     g.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     g.add_argument("--tasks", nargs="+", default=["all"])
-    g.add_argument("--num", type=int, default=100, help="demos per task (paper: 100)")
+    g.add_argument("--num", type=int, default=100, help="training seeds per task (paper: 100 demos); with "
+                   "--accepted, the most seeds a task may draw")
+    g.add_argument("--accepted", type=int, default=None, metavar="N",
+                   help="draw training seeds in order until N demos of each task are accepted (at most --num seeds)")
     g.add_argument("--workers", type=int, default=1)
     g.add_argument("--ray", metavar="ADDRESS", default=None,
                    help="run the tasks on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
@@ -386,11 +421,16 @@ def main(argv=None):
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         if args.num < 1 or args.workers < 1:
             ap.error("--num and --workers must be >= 1")
+        if args.accepted is not None and not 1 <= args.accepted <= args.num:
+            ap.error(f"--accepted {args.accepted}: give 1 to --num ({args.num}); --num caps the seeds a task draws")
         report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
-                          planner=args.planner, control_mode=args.control_mode)
+                          planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
         for r in report["tasks"]:
             print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
                   + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
+            if args.accepted is not None and r["accepted"] < args.accepted:
+                print(f"task {r['task_id']}: {args.num} seeds drew only {r['accepted']} of the {args.accepted} accepted "
+                      f"demos asked for; run again with a larger --num (it resumes)")
         return report
     if args.cmd == "render":
         from tqdm import tqdm

@@ -1,16 +1,18 @@
 #!/usr/bin/env bash
 # Baselines campaign, step 1 (docs/baselines.md): Object-Soft expert demos, resumable across sessions.
-#   bash scripts/campaign_demos.sh [NUM_PER_TASK=100] [WORKERS=1] [ROUND=10]
+#   bash scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
 # Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
 # R_max histogram) are copied back into demos/object_soft/ for the commit. On a machine without
 # the episodes, the committed QC logs are copied out first and `generate` records their accepted
-# episodes again. Rounds of ROUND more seeds per task keep the tasks level if a session ends early.
-# NUM counts training seeds per task, not accepted demos: a task that rejects some needs a larger NUM.
+# episodes again. Rounds of ROUND more accepted demos per task keep the tasks level if a session
+# ends early. Each task draws training seeds in order until it has ACCEPTED demos (the expert fails
+# on some seeds: pastry010 rocks in the basket after release), at most MAX_SEEDS seeds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}
-(( NUM > 0 && WORKERS > 0 && ROUND > 0 )) || { echo "usage: $0 [NUM>0] [WORKERS>0] [ROUND>0]" >&2; exit 2; }
+NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}; MAX_SEEDS=${4:-250}
+(( NUM > 0 && WORKERS > 0 && ROUND > 0 && MAX_SEEDS >= NUM )) || {
+  echo "usage: $0 [ACCEPTED>0] [WORKERS>0] [ROUND>0] [MAX_SEEDS>=ACCEPTED]" >&2; exit 2; }
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 PY=${PY:-.venv/bin/python}
 store=$SOFTVT_DEMOS_DIR/object_soft
@@ -32,7 +34,8 @@ sync_back() {
 trap sync_back EXIT
 for ((n = ROUND; n < NUM + ROUND; n += ROUND)); do
   k=$(( n < NUM ? n : NUM ))
-  "$PY" -m mani_skill_softvt.demos generate --suite object_soft --num "$k" --workers "$WORKERS" --out "$SOFTVT_DEMOS_DIR"
+  "$PY" -m mani_skill_softvt.demos generate --suite object_soft --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
+    --out "$SOFTVT_DEMOS_DIR"
   "$PY" -m mani_skill_softvt.demos stats --suite object_soft --out "$SOFTVT_DEMOS_DIR" || true
   sync_back
 done

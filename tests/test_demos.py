@@ -79,6 +79,33 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
     assert (summary["generated"], summary["accepted"]) == (1, 1)
 
 
+def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_path, capsys):
+    """A task whose expert fails on a seed still ends with the demos asked for: the rejected seed
+    (logged) is skipped, the next seed is drawn, and drawing stops at the count asked."""
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.seeds import train_seed
+    from mani_skill_softvt.demos import main
+    from mani_skill_softvt.fileio import append_jsonl
+
+    demo_set = DemoSet(tmp_path, "object_rigid")
+    first = train_seed(3, 0)
+    append_jsonl(demo_set.qc_log(3), {"seed": first, "planner": "mplib", "accepted": False,
+                                       "problems": ["not successful at the last step"], "steps": 150, "r_max": 0.5,
+                                       "wall_s": 10.0})
+    report = generate("object_rigid", [3], 3, tmp_path, accepted=1)
+    (row,) = report["tasks"]
+    assert (row["generated"], row["accepted"], row["train_seeds"]) == (2, 1, [first, first + 1]), row
+    assert [q["seed"] for q in demo_set.verdicts(3)] == [first, first + 1]  # seed 2 was never drawn
+    manifest = json.loads(demo_set.manifest.read_text())
+    assert manifest["train_seeds"]["3"] == [first, first + 1]
+    with h5py.File(demo_set.trajectory(3), "r") as f:
+        assert list(f.keys()) == ["traj_0"] and f["traj_0"].attrs["seed"] == first + 1
+    with pytest.raises(SystemExit):
+        main(["generate", "--suite", "object_rigid", "--tasks", "3", "--num", "2", "--accepted", "3", "--out",
+              str(tmp_path)])
+    assert "--num caps the seeds" in capsys.readouterr().err
+
+
 def test_stored_states_replay_the_actions_bit_for_bit(dataset):
     out, _ = dataset
     ep = read_episode(next((out / "object_soft" / "task3").glob("ep_*.h5")))
