@@ -5,6 +5,7 @@
     python -m mani_skill_softvt.demos generate --suite object_soft --accepted 100 --num 200   # 100 accepted a task
     python -m mani_skill_softvt.demos generate --suite spatial_soft --num 100 --ray auto   # on a Ray cluster
     python -m mani_skill_softvt.demos render --suite object_soft --tasks 3 --obs-mode rgb+tactile
+    python -m mani_skill_softvt.demos render --suite object_soft --camera-size 84x84   # at a CPU policy's size
     python -m mani_skill_softvt.demos stats --suite object_soft
 
 ``generate`` runs the scripted expert once per episode (training seeds, disjoint from the ID
@@ -27,7 +28,7 @@ import numpy as np
 
 from .data.demo_set import DemoSet
 from .fileio import append_jsonl, atomic_write_json, read_json
-from .observations import tactile_keys
+from .observations import camera_sensor_configs, tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
@@ -288,8 +289,11 @@ def format_stats(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str) -> int:
-    """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline.
+def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str,
+                        camera_size: tuple[int, int] | None = None) -> int:
+    """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline, the
+    cameras at ``camera_size`` = (height, width) (None: 224x224). Rendering at the size a policy
+    takes spends no raster time on pixels it would shrink away.
 
     Every recorded env state (reset + one per step) is restored and observed in order, so the
     cameras, the tactile images (whose shear tracking follows the episode) and the actions share
@@ -300,14 +304,14 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     """
     from .data.trajectory import state_dict_at, write_rendering
     from .evaluation.wrapper import make_env
-    from .observations import flatten_batch
+    from .observations import camera_sensor_configs, flatten_batch
 
     env = None
 
     def observe(seed: int, states: dict) -> list[dict]:
         nonlocal env
         if env is None:
-            env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode)
+            env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode, camera_size=camera_size)
         env.reset(seed=seed)
         frames = []
         for t in range(len(next(iter(states.values())))):
@@ -316,17 +320,17 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
         return frames
 
     try:
-        return write_rendering(trajectory_h5, out_h5, obs_mode, observe)
+        return write_rendering(trajectory_h5, out_h5, obs_mode, observe, camera_sensor_configs(camera_size))
     finally:
         if env is not None:
             env.close()
 
 
-def _render_task(suite: str, task_id: int, out: str, obs_mode: str, queue) -> tuple[int, int]:
+def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size, queue) -> tuple[int, int]:
     """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`)."""
     demo_set = DemoSet(Path(out), suite)
-    return task_id, render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode), suite,
-                                        task_id, obs_mode)
+    return task_id, render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
+                                        suite, task_id, obs_mode, camera_size)
 
 
 def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = (),
@@ -354,14 +358,14 @@ def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[s
 CURRENT_RENDER_KEYS = {"rgb+tactile": tuple(tactile_keys(("depth",)))}
 
 
-def _image_size(text: str) -> tuple[int, int] | None:
+def _image_size(text: str, flag: str = "--image-size") -> tuple[int, int] | None:
     """``HxW`` -> (H, W); ``native`` -> None (each stream keeps its size)."""
     if text == "native":
         return None
     try:
         h, w = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--image-size {text!r}: give HxW (e.g. 224x224) or 'native'") from None
+        raise ValueError(f"{flag} {text!r}: give HxW (e.g. 84x84) or 'native'") from None
     return h, w
 
 
@@ -394,6 +398,8 @@ def main(argv=None):
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
     r.add_argument("--obs-mode", default="rgb+tactile")
+    r.add_argument("--camera-size", default="native", metavar="HxW",
+                   help="render both cameras at HxW (e.g. 84x84, the cpu baselines' input) instead of 224x224")
     r.add_argument("--workers", type=int, default=1, help="tasks rendered in parallel processes")
     r.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     s = sub.add_parser("stats", help="per-task statistics of generated demos")
@@ -405,6 +411,7 @@ def main(argv=None):
     e.add_argument("--out", type=Path, default=None, help=_OUT_HELP)
     e.add_argument("--lerobot-out", type=Path, required=True, help="new (empty) directory for the LeRobot dataset")
     e.add_argument("--obs-mode", default="rgb+tactile", help="which rendering to export (as passed to render)")
+    e.add_argument("--camera-size", default="native", metavar="HxW", help="which rendering to export (as passed to render)")
     e.add_argument("--image-size", default="224x224", metavar="HxW",
                    help="resize every image stream (cameras and tactile) to HxW, as LeRobot's Diffusion Policy "
                         "needs one shape for all image inputs; 'native' keeps each stream's size (tactile 240x320)")
@@ -439,18 +446,23 @@ def main(argv=None):
 
         if args.workers < 1:
             ap.error("--workers must be >= 1")
+        try:
+            camera_size = _image_size(args.camera_size, "--camera-size")
+            camera_sensor_configs(camera_size)
+        except ValueError as err:
+            ap.error(str(err))
         demo_set = DemoSet(args.out, args.suite)
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         todo = []
         for t in tasks:
-            src = demo_set.trajectory(t)
+            src, dst = demo_set.trajectory(t), demo_set.rendered(t, args.obs_mode, camera_size)
             if not src.exists():
                 print(f"task {t}: no demos at {src}; run generate first")
-            elif rendering_is_current(src, demo_set.rendered(t, args.obs_mode), CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
+            elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
                                       TACTILE_MODEL_VERSION if "tactile" in args.obs_mode else None):
-                print(f"task {t}: already rendered (delete {demo_set.rendered(t, args.obs_mode).name} to redo it)")
+                print(f"task {t}: already rendered (delete {dst.name} to redo it)")
             else:
-                todo.append((args.suite, t, str(args.out), args.obs_mode))
+                todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
         from .parallel import run_tasks
 
         try:
@@ -468,7 +480,8 @@ def main(argv=None):
         demo_set = DemoSet(args.out, args.suite)
         tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
         try:
-            info = export_lerobot(demo_set.rendered_sources(tasks, args.obs_mode), args.lerobot_out,
+            sources = demo_set.rendered_sources(tasks, args.obs_mode, _image_size(args.camera_size, "--camera-size"))
+            info = export_lerobot(sources, args.lerobot_out,
                                   use_videos=not args.no_video, image_size=_image_size(args.image_size))
         except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
             ap.error(str(err))

@@ -16,7 +16,8 @@ the baselines and the LeRobot export store them), one frame is:
 | ``tactile/<side>/marker_initial``, ``.../marker_current`` | (99, 2) marker pixels at rest, now | float32 | ``rgb+tactile`` |
 
 (``state`` is the same proprioception flattened into one vector; camera sizes follow the env's
-``sensor_configs``.) The instruction is ``env.unwrapped.instruction``, never an observation.
+``sensor_configs``: :func:`camera_sensor_configs` renders both cameras at another size, e.g. the
+84x84 a CPU policy takes, instead of rendering 224x224 and shrinking.) The instruction is ``env.unwrapped.instruction``, never an observation.
 
 ``info`` from the env holds booleans as batch-of-one tensors (``success``, ``fail``,
 ``is_grasped``, ``dropped``, ``in_target``, ``other_in_target``);
@@ -36,6 +37,25 @@ TACTILE_FIELDS = ("rgb", "depth", *MARKER_FIELDS)
 QPOS, QVEL = "agent/qpos", "agent/qvel"
 TCP_POSE, GRIPPER_WIDTH = "extra/tcp_pose", "extra/gripper_width"
 PROPRIOCEPTION = (QPOS, QVEL, TCP_POSE, GRIPPER_WIDTH)
+NATIVE_CAMERA_SIZE = (224, 224)  # (height, width) of both cameras by default (the paper's views)
+
+
+def camera_sensor_configs(camera_size: tuple[int, int] | None) -> dict:
+    """ManiSkill ``sensor_configs`` that render both cameras at ``camera_size`` = (height, width);
+    empty for None or the native size. (The GelSights are not cameras: their 240x320 image is
+    the sensor's.)"""
+    if camera_size is None or tuple(camera_size) == NATIVE_CAMERA_SIZE:
+        return {}
+    h, w = (int(v) for v in camera_size)
+    if min(h, w) < 8:
+        raise ValueError(f"camera_size {tuple(camera_size)}: give (height, width), each at least 8 pixels")
+    return {"width": w, "height": h}
+
+
+def camera_size_name(camera_size: tuple[int, int] | None) -> str:
+    """``84x84``: how a camera size appears in file names and on the command line."""
+    h, w = camera_size or NATIVE_CAMERA_SIZE
+    return f"{h}x{w}"
 
 
 def camera_key(camera: str) -> str:

@@ -4,6 +4,10 @@ A policy sees observations only: ``reset(instruction, seed)`` at each episode st
 ``act(obs) -> (k, d)`` action chunks in the env's control mode, each executed for up to the
 runner's ``replan_steps`` before the next call. ``name`` labels its records.
 
+A policy that was trained on camera images of another size than the env's 224x224 says so in
+``camera_size`` = (height, width): the evaluator renders its cameras at that size (ManiSkill's
+``sensor_configs``), so it sees what it was trained on rather than a shrunken 224x224 image.
+
 A *privileged* policy (``privileged = True``: the scripted experts) plans on the simulator: the
 runner hands it the env through ``bind(env)`` before ``reset`` and labels its records so; it
 cannot be served over the network. Every other policy, in process or behind ``ws://``, never
@@ -23,6 +27,7 @@ class Policy:
 
     name = "policy"
     privileged = False
+    camera_size: tuple[int, int] | None = None  # None: the env's native 224x224
 
     def bind(self, env) -> None:
         """The env a privileged policy plans on (called by the runner before ``reset``)."""

@@ -74,3 +74,17 @@ class Crusher(HoldPolicy):
     def act(self, obs):
         self.calls += 1
         return crush_chunk(self.target_top, self.calls)
+
+
+class SmallCameras(HoldPolicy):
+    """Asks the evaluator for 32x24 cameras (``camera_size``), checks that it sees them and ends
+    the episode at its first step with a NaN action (a recorded policy error naming the sizes)."""
+
+    name = "small_cameras"
+    camera_size = (24, 32)
+
+    def act(self, obs):
+        sizes = sorted({tuple(obs["sensor_data"][c]["rgb"].shape[1:3]) for c in ("base_camera", "hand_camera")})
+        if sizes != [self.camera_size]:
+            raise ValueError(f"cameras seen at {sizes}")
+        return np.full_like(super().act(obs), np.nan)

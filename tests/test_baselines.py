@@ -30,13 +30,14 @@ TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), 
             checkpoint_every=2, warmup_steps=2, tasks=(0,), threads=1, train_timesteps=20, inference_timesteps=4)
 
 
-def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSION):
-    """Task 0 of object_soft: a trajectory file and its rgb+tactile rendering (random images, an
-    action that moves with the state so that there is something to learn)."""
+def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSION, camera_size=(224, 224)):
+    """Task 0 of object_soft: a trajectory file and its rgb+tactile rendering with the cameras at
+    ``camera_size`` (random images, an action that moves with the state so that there is
+    something to learn). Called again with another size, it adds that rendering."""
     rng = np.random.default_rng(seed)
     ds = DemoSet(root, "object_soft")
-    ds.dir.mkdir(parents=True)
-    with h5py.File(ds.trajectory(0), "w") as ft, h5py.File(ds.rendered(0, "rgb+tactile"), "w") as fr:
+    ds.dir.mkdir(parents=True, exist_ok=True)
+    with h5py.File(ds.trajectory(0), "w") as ft, h5py.File(ds.rendered(0, "rgb+tactile", camera_size), "w") as fr:
         for e, t in enumerate(lengths):
             a = np.zeros((t, 7), np.float32)
             a[:, 0] = np.linspace(0.5, 0.6, t)
@@ -52,7 +53,7 @@ def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSI
             o["extra/tcp_pose"], o["extra/gripper_width"] = pose, np.full((t + 1, 1), 0.08, np.float32)
             o["agent/qpos"] = np.tile(np.r_[np.zeros(7), 0.04, 0.04], (t + 1, 1)).astype(np.float32)
             for cam in ("base_camera", "hand_camera"):
-                o[f"sensor_data/{cam}/rgb"] = rng.integers(0, 256, (t + 1, 224, 224, 3), dtype=np.uint8)
+                o[f"sensor_data/{cam}/rgb"] = rng.integers(0, 256, (t + 1, *camera_size, 3), dtype=np.uint8)
             for s in ("left", "right"):
                 o[f"tactile/{s}/rgb"] = rng.integers(0, 256, (t + 1, 240, 320, 3), dtype=np.uint8)
                 o[f"tactile/{s}/depth"] = rng.integers(0, 100, (t + 1, 240, 320), dtype=np.int16)
@@ -153,6 +154,31 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
         load_windows(cfg, tmp_path / "demos", None)
 
 
+def test_training_reads_the_rendering_at_the_policys_camera_size_and_evaluation_renders_it_again(tmp_path):
+    """Demos rendered at the policy's camera size are read as they are (no resizing), and the
+    trained policy asks the evaluator for that size; trained on the native 224x224 rendering
+    (shrunk), it asks for nothing."""
+    root = tmp_path / "demos"
+    _write_demos(root)
+    cfg = make_config("vo-c", **TINY)
+    native = load_windows(cfg, root, None)
+    assert native.camera_render_size == (224, 224) and native.frames["base"].shape[1:3] == (16, 16)
+    assert load_policy(str(T.train(cfg, root, tmp_path / "native", progress=False))).camera_size is None
+
+    ds = _write_demos(root, camera_size=(16, 16))
+    sized = load_windows(cfg, root, tmp_path / "cache.npz")
+    assert sized.camera_render_size == (16, 16)
+    with h5py.File(ds.rendered(0, "rgb+tactile", (16, 16)), "r") as f:
+        stored = f["traj_0/obs/sensor_data/base_camera/rgb"][()]
+    assert np.array_equal(sized.frames["base"][:len(stored)], stored)  # the pixels as rendered
+    assert load_windows(cfg, root, tmp_path / "cache.npz").camera_render_size == (16, 16)  # from the cache
+    path = T.train(cfg, root, tmp_path / "sized", progress=False)
+    assert torch.load(path, weights_only=False)["camera_render_size"] == [16, 16]
+    assert load_policy(str(path)).camera_size == (16, 16)
+    assert ds.rendered(0, "rgb+tactile", (16, 16)).name == "task0_rgb_tactile_16x16.h5"
+    assert ds.rendered(0, "rgb+tactile", (224, 224)) == ds.rendered(0, "rgb+tactile")
+
+
 # ---------------------------------------------------------------------------------- training
 
 def test_batches_cover_each_epoch_once():
@@ -213,7 +239,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
                                  "unet_dims": (64, 128), "unet_groups": 8, "batch_size": 8})
     w = load_windows(cfg, tmp_path / "demos", None)
     untrained = T.Training(cfg, w.stats(), cfg.steps).model.eval()
-    _, trained = load_policy_file(T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False))
+    _, trained, _ = load_policy_file(T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False))
     obs, act = w.batch(np.array([20]))
 
     def error(model):

@@ -171,6 +171,36 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
         assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)
 
 
+def test_render_at_a_camera_size_shows_the_same_views_with_fewer_pixels(dataset, tmp_path):
+    """``render --camera-size`` renders both cameras at that size (ManiSkill's sensor_configs, kept
+    in the json for its tools): the same views as the native 224x224 rendering shrunk to that
+    size, up to the sampling of the raster (far less than the robot's motion changes a view)."""
+    import shutil
+
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.images import resize_image
+    from mani_skill_softvt.demos import main
+
+    out, _ = dataset
+    shutil.copytree(out / "object_soft", tmp_path / "object_soft")
+    ds = DemoSet(tmp_path, "object_soft")
+    main(["render", "--tasks", "3", "--obs-mode", "rgb", "--camera-size", "56x56", "--out", str(tmp_path)])
+    main(["render", "--tasks", "3", "--obs-mode", "rgb", "--out", str(tmp_path)])
+    sized_h5 = ds.rendered(3, "rgb", (56, 56))
+    assert sized_h5.name == "task3_rgb_56x56.h5" and ds.rendered(3, "rgb").exists()
+    meta = json.loads(sized_h5.with_suffix(".json").read_text())
+    assert meta["env_info"]["env_kwargs"]["sensor_configs"] == {"width": 56, "height": 56}
+    with h5py.File(sized_h5, "r") as f, h5py.File(ds.rendered(3, "rgb"), "r") as g:
+        for cam in ("base_camera", "hand_camera"):
+            small = f[f"traj_0/obs/sensor_data/{cam}/rgb"][()].astype(np.float32)
+            native = g[f"traj_0/obs/sensor_data/{cam}/rgb"][()]
+            assert small.shape == (native.shape[0], 56, 56, 3) and native.shape[1:3] == (224, 224)
+            shrunk = np.stack([resize_image(im, (56, 56)) for im in native]).astype(np.float32)
+            raster = np.abs(small - shrunk).mean(axis=(1, 2, 3))
+            motion = np.abs(shrunk[-1] - shrunk[0]).mean()
+            assert raster.max() < 0.25 * motion, (cam, raster.max(), motion)
+
+
 def test_truncated_demo_files_are_named(dataset, tmp_path, capsys):
     import shutil
 

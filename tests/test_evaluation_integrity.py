@@ -197,3 +197,12 @@ def test_a_user_policy_cannot_claim_the_privilege_of_the_builtin_experts(cube_en
     rec = run_episode(cube_env, policy, _episode(0))
     assert policy.env is None and not rec["receipt"]["privileged"]
     assert rec["termination"] in ("timeout", "success", "dropped") and rec["steps"] > 0
+
+
+def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_path):
+    """A policy trained on small images (``camera_size``) sees its cameras rendered at that size,
+    and its record says so; other policies' records keep the native 224x224."""
+    eps = episodes("object_soft", "id", tasks=[TASK], per_task=1)
+    (rec,) = evaluate(eps, "misbehaving_policies:SmallCameras", tmp_path / "small.jsonl", obs_mode="rgb")
+    assert rec["termination"] == "policy_error" and "NaN" in rec["error"], rec["error"]  # not "cameras seen at"
+    assert rec["camera_size"] == [24, 32] and rec["steps"] == 0

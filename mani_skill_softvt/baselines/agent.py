@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..observations import flatten_batch
+from ..observations import NATIVE_CAMERA_SIZE, flatten_batch
 from ..policy import Policy
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import DPConfig
@@ -27,7 +27,8 @@ GRIPPER = 6  # the action's gripper column
 
 
 def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
-    """The config and the weights (a state dict) of a ``policy.pt``; a clear error for anything else."""
+    """The config and the checkpoint of a ``policy.pt`` (its ``model`` is a state dict); a clear
+    error for anything else."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
@@ -42,16 +43,23 @@ def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
         raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders model "
                          f"{TACTILE_MODEL_VERSION} (tactile.constants.MODEL_VERSION): its touch inputs would not be what it "
                          "learned. Re-render the demos and retrain it (docs/baselines.md)")
-    return cfg, ckpt["model"]
+    return cfg, ckpt
 
 
-def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel]:
-    """The config and the (EMA) model of a ``policy.pt``, ready for inference on the CPU."""
-    cfg, weights = read_policy_file(path)
+def camera_render_size(ckpt: dict) -> tuple[int, int] | None:
+    """(height, width) a policy's training cameras were rendered at, None for the native 224x224
+    (policy files from before it was kept were trained on native renderings)."""
+    size = ckpt.get("camera_render_size")
+    return tuple(int(v) for v in size) if size and tuple(size) != NATIVE_CAMERA_SIZE else None
+
+
+def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel, dict]:
+    """The config, the (EMA) model, ready for inference on the CPU, and the checkpoint of a ``policy.pt``."""
+    cfg, ckpt = read_policy_file(path)
     model = DiffusionPolicyModel(cfg, empty_stats(cfg))
-    model.load_state_dict(weights)
+    model.load_state_dict(ckpt["model"])
     model.eval()
-    return cfg, model
+    return cfg, model, ckpt
 
 
 def policy_name(cfg: DPConfig) -> str:
@@ -73,8 +81,9 @@ class DiffusionPolicyAgent(Policy):
 
     def __init__(self, path: str | Path, threads: int = 1):
         self.path = Path(path)
-        self.cfg, self.model = load_policy_file(self.path)
+        self.cfg, self.model, ckpt = load_policy_file(self.path)
         self.name = policy_name(self.cfg)
+        self.camera_size = camera_render_size(ckpt)  # the evaluator renders its cameras as in training
         self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"  # what required_modes() says
         self.scheduler = noise_scheduler(self.cfg, inference=True)
         self.threads = threads

@@ -5,6 +5,11 @@ Reads each task's trajectory file (actions, binary actions) and its ``rgb+tactil
 policy's inputs (:mod:`.features`) and keeps them in memory as arrays. Only policy observations
 are read, never the ``evaluator/`` group or the env states.
 
+The rendering with the cameras at the config's ``camera_size`` is read when every task has one
+(``demos render --camera-size 84x84``), else the native 224x224 one, shrunk. Which it was is
+kept (:attr:`DemoWindows.camera_render_size`, then in ``policy.pt``), and the evaluator renders
+the cameras at that size again, so a policy is evaluated on the images it was trained on.
+
 A sample is the step ``t`` of an episode: the observations of steps ``t-1, t`` (the first step
 repeats itself) and the actions ``t .. t+15`` (past the end, the last action repeats: the
 expert holds still). The variant picks the gripper column: continuous closure or binary.
@@ -29,7 +34,7 @@ from ..data.demo_set import DemoSet
 from ..data.trajectory import open_h5, tactile_model_of
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write
-from ..observations import CAMERAS, QPOS, TCP_POSE, camera_key, tactile_keys
+from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, camera_sensor_configs, tactile_keys
 from .config import DPConfig
 from .features import frame_features
 
@@ -49,6 +54,7 @@ class DemoWindows:
     act_starts: np.ndarray  # (E + 1,) offsets into actions
     cfg: DPConfig
     key: str = ""  # cache_key of the sources it was read from (a resumed run checks it)
+    camera_render_size: tuple[int, int] = NATIVE_CAMERA_SIZE  # (height, width) the cameras were rendered at
 
     def __len__(self) -> int:
         return int(self.act_starts[-1])
@@ -83,7 +89,12 @@ class DemoWindows:
 
 
 def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
-    pairs = DemoSet(demos_root, cfg.suite).rendered_sources(list(cfg.tasks), OBS_MODE)
+    """(task, trajectory, rendering) of every task: the renderings at ``camera_size`` where every
+    task has one, else the native ones (see the module docstring)."""
+    demo_set = DemoSet(demos_root, cfg.suite)
+    sized = camera_sensor_configs(cfg.camera_size) and all(
+        demo_set.rendered(t, OBS_MODE, cfg.camera_size).exists() for t in cfg.tasks)
+    pairs = demo_set.rendered_sources(list(cfg.tasks), OBS_MODE, cfg.camera_size if sized else None)
     return [(task, p.trajectory_h5, p.rendered_h5) for task, p in zip(cfg.tasks, pairs)]
 
 
@@ -101,6 +112,7 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
     """Read the demonstrations into :class:`DemoWindows` (see the module docstring)."""
     frames: dict[str, list[np.ndarray]] = {}
     actions, obs_starts, act_starts = [], [0], [0]
+    render_sizes = set()
     column = "actions_binary" if cfg.binary_gripper else "actions"
     sources = _sources(cfg, demos_root)
     with tqdm(total=len(sources), desc="prepare demos", unit="task") as bar:
@@ -120,6 +132,10 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
                     if n != len(a) + 1:
                         raise ValueError(f"{rendered}:{name}: {n} frames for {len(a)} actions (expected one more); "
                                          f"the rendering is stale: re-render task {task}")
+                    render_sizes |= {tuple(obs[camera_key(c)].shape[1:3]) for c in CAMERAS if camera_key(c) in obs}
+                    if len(render_sizes) > 1:
+                        raise ValueError(f"{rendered}:{name}: cameras rendered at {sorted(render_sizes)}; the demos a "
+                                         "policy learns from share one camera size: render every task at the same size")
                     keys = [k for k in _needed_keys(cfg) if k in obs]
                     data = {k: obs[k][()] for k in keys}
                     for i in range(n):
@@ -137,8 +153,9 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
             bar.update()
     if not actions:
         raise ValueError(f"no demonstrations found for tasks {cfg.tasks} of {cfg.suite} under {demos_root}")
+    size = tuple(int(v) for v in render_sizes.pop()) if render_sizes else NATIVE_CAMERA_SIZE
     return DemoWindows({k: np.stack(v) for k, v in frames.items()}, np.concatenate(actions),
-                       np.asarray(obs_starts), np.asarray(act_starts), cfg)
+                       np.asarray(obs_starts), np.asarray(act_starts), cfg, camera_render_size=size)
 
 
 def _needed_keys(cfg: DPConfig) -> list[str]:
@@ -151,9 +168,10 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWin
     key = cache_key(cfg, _sources(cfg, demos_root))
     if cache is not None and cache.exists():
         with np.load(cache, allow_pickle=False) as z:
-            if str(z["key"]) == key:
+            if str(z["key"]) == key and "camera_render_size" in z.files:
                 frames = {k[len("frame/"):]: z[k] for k in z.files if k.startswith("frame/")}
-                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg, key)
+                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg, key,
+                                   tuple(int(v) for v in z["camera_render_size"]))
     windows = prepare(cfg, demos_root)
     windows.key = key
     if cache is not None:
@@ -162,7 +180,8 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWin
         def save(tmp: Path):
             with tmp.open("wb") as fh:
                 np.savez(fh, key=key, actions=windows.actions, obs_starts=windows.obs_starts,
-                         act_starts=windows.act_starts, **arrays)
+                         act_starts=windows.act_starts, camera_render_size=np.asarray(windows.camera_render_size),
+                         **arrays)
 
         atomic_write(cache, save)
     return windows

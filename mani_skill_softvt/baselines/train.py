@@ -224,6 +224,7 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
         save(policy_path, {"config": cfg.to_dict(), "model": run.policy_state(), "steps": steps,
                            "tactile_model": TACTILE_MODEL_VERSION if cfg.tactile else None,
                            "episodes": windows.episodes, "samples": len(windows),
+                           "camera_render_size": list(windows.camera_render_size),
                            "train_wall_s_last_call": time.perf_counter() - t0})
         plot_losses(run.losses, out / "loss.png", f"{cfg.variant} ({cfg.preset}), {windows.episodes} demos")
     return policy_path

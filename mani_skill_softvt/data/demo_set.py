@@ -8,6 +8,7 @@
     <root>/<suite>/task<k>/qc.jsonl            the screening verdict of every generated episode
     <root>/<suite>/task<k>.h5 / .json          accepted episodes in ManiSkill's trajectory format
     <root>/<suite>/task<k>_<obs_mode>.h5       the same episodes re-rendered into observations
+    <root>/<suite>/task<k>_<obs_mode>_<H>x<W>.h5   ... with the cameras rendered at H x W (not 224 x 224)
     <root>/<suite>/qc_report.json, stats.json, r_max_hist.png
 
 Generation (:mod:`mani_skill_softvt.demos`), rendering, the LeRobot export and the statistics
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..fileio import read_jsonl
+from ..observations import camera_sensor_configs, camera_size_name
 from ..tasks.suites import NUM_TASKS, get_suite
 
 
@@ -76,9 +78,11 @@ class DemoSet:
         """The task's accepted episodes, ManiSkill trajectory file (its ``.json`` sits beside it)."""
         return self.dir / f"task{task_id}.h5"
 
-    def rendered(self, task_id: int, obs_mode: str) -> Path:
-        """The task's episodes re-rendered into ``obs_mode`` observations."""
-        return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}.h5"
+    def rendered(self, task_id: int, obs_mode: str, camera_size: tuple[int, int] | None = None) -> Path:
+        """The task's episodes re-rendered into ``obs_mode`` observations, the cameras at
+        ``camera_size`` = (height, width) (None: the native 224x224)."""
+        size = f"_{camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
+        return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}{size}.h5"
 
     def renderings(self, task_id: int) -> list[Path]:
         """Every rendering of the task's episodes on disk, whatever its obs mode."""
@@ -87,19 +91,23 @@ class DemoSet:
     def tasks_with_trajectories(self) -> list[int]:
         return [t for t in range(NUM_TASKS) if self.trajectory(t).exists()]
 
-    def rendered_sources(self, tasks: list[int], obs_mode: str = "rgb+tactile") -> list:
+    def rendered_sources(self, tasks: list[int], obs_mode: str = "rgb+tactile",
+                         camera_size: tuple[int, int] | None = None) -> list:
         """The (trajectory, rendered) pairs of ``tasks`` (the LeRobot export's and the baselines'
-        training input); a missing file is named with the command that writes it."""
+        training input), the renderings with cameras at ``camera_size``; a missing file is named
+        with the command that writes it."""
         from .lerobot import Source
 
+        size = f" --camera-size {camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
         out = []
         for t in tasks:
-            traj, rendered = self.trajectory(t), self.rendered(t, obs_mode)
+            traj, rendered = self.trajectory(t), self.rendered(t, obs_mode, camera_size)
             if not traj.exists():
                 raise FileNotFoundError(f"{traj} does not exist; run `python -m mani_skill_softvt.demos generate "
                                         f"--suite {self.suite} --tasks {t} --out {self.root}` first")
             if not rendered.exists():
                 raise FileNotFoundError(f"{rendered} does not exist; run `python -m mani_skill_softvt.demos render "
-                                        f"--suite {self.suite} --tasks {t} --obs-mode {obs_mode} --out {self.root}` first")
+                                        f"--suite {self.suite} --tasks {t} --obs-mode {obs_mode}{size} --out {self.root}` "
+                                        "first")
             out.append(Source(traj, rendered))
         return out

@@ -146,7 +146,8 @@ def tactile_model_of(episode_group) -> int:
     return int(episode_group.attrs.get("tactile_model", 1))
 
 
-def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode) -> int:
+def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode,
+                    sensor_configs: dict | None = None) -> int:
     """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many.
 
     ``observe_episode(seed, states)`` restores each of an episode's recorded env states (flat
@@ -154,7 +155,9 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
     observation per state (:func:`mani_skill_softvt.demos.render_observations` does it with the
     env). Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside the episode's actions,
     flags and attributes, and the trajectory's json is written beside it: ``out_h5`` is a
-    ManiSkill trajectory in ``obs_mode``. Written atomically; the source is checked first.
+    ManiSkill trajectory in ``obs_mode`` (with the ``sensor_configs`` the env rendered with in its
+    env kwargs, so ManiSkill's tools rebuild the same cameras). Written atomically; the source is
+    checked first.
     """
     problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
     if problem:
@@ -187,6 +190,9 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
     meta_path = Path(trajectory_h5).with_suffix(".json")
     if meta_path.exists():  # the trajectory's json, for the rendered obs mode (ManiSkill pairs them by name)
         meta = read_json(meta_path)
-        meta.setdefault("env_info", {}).setdefault("env_kwargs", {})["obs_mode"] = obs_mode
+        env_kwargs = meta.setdefault("env_info", {}).setdefault("env_kwargs", {})
+        env_kwargs["obs_mode"] = obs_mode
+        if sensor_configs:
+            env_kwargs["sensor_configs"] = {**env_kwargs.get("sensor_configs", {}), **sensor_configs}
         atomic_write_json(Path(out_h5).with_suffix(".json"), meta)
     return n

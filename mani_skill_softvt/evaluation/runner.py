@@ -90,6 +90,15 @@ def record_field(rec: dict, key: str):
     return rec.get(key)
 
 
+def camera_size_of(env) -> list[int] | None:
+    """(height, width) the env's cameras render at, None in obs modes without images."""
+    from ..observations import CAMERAS
+
+    sensors = env.scene.sensors if "rgb" in env.obs_mode else {}
+    cameras = [sensors[c] for c in CAMERAS if c in sensors]
+    return [int(cameras[0].config.height), int(cameras[0].config.width)] if cameras else None
+
+
 def _seal(rec: dict) -> dict:
     rec["record_sha256"] = record_hash(rec)
     return rec
@@ -127,7 +136,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     success = ep.termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
-           "tactile_model": tactile_model(u.obs_mode),
+           "tactile_model": tactile_model(u.obs_mode), "camera_size": camera_size_of(u),
            "termination": ep.termination, "error": ep.error,
            "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
            "dropped": info_bool(info, "dropped"), "steps": ep.steps, "r_max": float(env.r_max),
@@ -152,7 +161,8 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
     policy = load_policy(policy_spec)
 
     def build():
-        return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode)
+        return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
+                        camera_size=getattr(policy, "camera_size", None))
 
     env = build()
     try:

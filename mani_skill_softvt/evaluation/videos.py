@@ -223,7 +223,8 @@ def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = 
     horizon = max_steps or C.MAX_EPISODE_STEPS
     limit = {"max_episode_steps": max_steps} if max_steps else {}
     policy = load_policy(policy_spec)
-    env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=control_mode, **limit)
+    env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=control_mode,
+                   camera_size=getattr(policy, "camera_size", None), **limit)
     result = {}
 
     def write(tmp: Path) -> None:

@@ -56,13 +56,19 @@ class DSRWrapper(gym.Wrapper):
         return obs, rew, terminated, truncated, self._score(info)
 
 
-def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=None, **kwargs) -> gym.Env:
+def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=None,
+             camera_size: tuple[int, int] | None = None, **kwargs) -> gym.Env:
     """The env of ``suite``'s task ``task_id`` (``kwargs`` go to ``gym.make``: obs_mode,
     control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``; its calibration card
-    is read from ``calibration_dir`` (default: the package's cards)."""
+    is read from ``calibration_dir`` (default: the package's cards). ``camera_size`` = (height,
+    width) renders the two policy cameras at that size (:func:`~mani_skill_softvt.observations.camera_sensor_configs`)."""
     from .. import tasks  # noqa: F401  (registers the envs)
+    from ..observations import camera_sensor_configs
 
     if calibration_dir is not None:  # only then: recorded env kwargs stay free of machine paths
         kwargs["calibration_dir"] = str(calibration_dir)
+    sized = camera_sensor_configs(camera_size)
+    if sized:  # only then, likewise: a native env's recorded kwargs stay as they were
+        kwargs["sensor_configs"] = {**kwargs.get("sensor_configs", {}), **sized}
     env = gym.make(get_suite(suite).env_id, task_id=task_id, **kwargs)
     return DSRWrapper(env) if dsr else env

@@ -37,7 +37,7 @@ SETTLE_SPEED = 2e-3  # m/s
 SETTLE_MAX_TIME = 3.0  # s
 SETTLE_VELOCITY_DAMPING = 0.9  # per 240 Hz tick while settling: e-folding time ~40 ms
 
-CAMERA_SIZE = 224  # policy camera resolution (the paper's 224x224 views)
+CAMERA_SIZE = 224  # policy camera resolution (the paper's 224x224 views; observations.NATIVE_CAMERA_SIZE)
 
 # ---------------------------------------------------------------- SoftVTBench suites
 # Robot rest configuration (ManiSkill's tabletop default) and its per-joint init noise (rad).
