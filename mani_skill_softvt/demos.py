@@ -44,15 +44,18 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
     """
     import os
 
-    from .data.record import SoftVTRecordEpisode, episode_paths
+    import logging
+
+    from .data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
     from .data.trajectory import read_episode, screen
     from .expert.solution import solve
     from .expert.solution import SOURCE_DESC
 
     tmp_h5, tmp_json = episode_paths(path.with_name(f"{path.stem}.partial.h5"))
-    rec = SoftVTRecordEpisode(env, output_dir=str(path.parent), trajectory_name=tmp_h5.stem, save_video=False,
-                              source_type="motionplanning", source_desc=SOURCE_DESC, record_reward=False,
-                              save_on_reset=False)
+    with quiet_maniskill_logger(logging.ERROR):  # "not installed with git": a pip install has no commit to record
+        rec = SoftVTRecordEpisode(env, output_dir=str(path.parent), trajectory_name=tmp_h5.stem, save_video=False,
+                                  source_type="motionplanning", source_desc=SOURCE_DESC, record_reward=False,
+                                  save_on_reset=False)
     try:
         solve(rec, seed=seed, planner=planner)
         rec.flush_trajectory()
