@@ -293,7 +293,7 @@ def format_stats(summary: dict) -> str:
 
 
 def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: int, obs_mode: str,
-                        camera_size: tuple[int, int] | None = None) -> int:
+                        camera_size: tuple[int, int] | None = None, progress=None) -> tuple[int, int]:
     """Re-render stored episodes into ``obs_mode`` observations on the same 20 Hz timeline, the
     cameras at ``camera_size`` = (height, width) (None: 224x224). Rendering at the size a policy
     takes spends no raster time on pixels it would shrink away.
@@ -301,9 +301,10 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     Every recorded env state (reset + one per step) is restored and observed in order, so the
     cameras, the tactile images (whose shear tracking follows the episode) and the actions share
     one timeline with no resampling; the file is written by
-    :func:`~mani_skill_softvt.data.trajectory.write_rendering`. The states are restored, not
-    re-simulated (ManiSkill's ``replay_trajectory --use-env-states`` steps the physics before each
-    restore).
+    :func:`~mani_skill_softvt.data.trajectory.write_rendering`, which keeps the episodes an earlier
+    ``out_h5`` already holds. The states are restored, not re-simulated (ManiSkill's
+    ``replay_trajectory --use-env-states`` steps the physics before each restore). Returns the
+    episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """
     from .data.trajectory import state_dict_at, write_rendering
     from .evaluation.wrapper import make_env
@@ -323,36 +324,37 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
         return frames
 
     try:
-        return write_rendering(trajectory_h5, out_h5, obs_mode, observe, camera_sensor_configs(camera_size))
+        return write_rendering(trajectory_h5, out_h5, obs_mode, observe, camera_sensor_configs(camera_size),
+                               CURRENT_RENDER_KEYS.get(obs_mode, ()), progress)
     finally:
         if env is not None:
             env.close()
 
 
-def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size, queue) -> tuple[int, int]:
-    """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`)."""
+def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size, queue) -> tuple[int, int, int]:
+    """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`): the
+    task, its episodes, how many were rendered now (the rest were current); one message per episode."""
     demo_set = DemoSet(Path(out), suite)
-    return task_id, render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
-                                        suite, task_id, obs_mode, camera_size)
+    return task_id, *render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
+                                         suite, task_id, obs_mode, camera_size, progress=queue.put)
 
 
 def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = (),
                          tactile_model: int | None = None) -> bool:
-    """Whether ``rendered_h5`` holds observations of exactly the episodes of ``trajectory_h5``, with
-    the ``needed`` observation keys (what this version renders) and, if given, frames of that
-    ``tactile_model`` version, and was written after it (a re-run of render skips such a task:
-    resume)."""
+    """Whether ``rendered_h5`` holds exactly the episodes of ``trajectory_h5``, each rendered from
+    the same states (:func:`~mani_skill_softvt.data.trajectory.rendering_current`: the source's
+    digest, the ``needed`` observation keys, frames of ``tactile_model`` if given); a re-run of
+    render skips such a task."""
     import h5py
 
-    from .data.trajectory import tactile_model_of
+    from .data.trajectory import episode_digest, rendering_current
 
-    if not rendered_h5.exists() or rendered_h5.stat().st_mtime_ns < trajectory_h5.stat().st_mtime_ns:
+    if not rendered_h5.exists():
         return False
     try:
         with h5py.File(trajectory_h5, "r") as a, h5py.File(rendered_h5, "r") as b:
             return set(a.keys()) == set(b.keys()) and all(
-                "obs" in b[k] and all(n in b[k]["obs"] for n in needed)
-                and (tactile_model is None or tactile_model_of(b[k]) == tactile_model) for k in b.keys())
+                rendering_current(b[k], episode_digest(a[k]), needed, tactile_model) for k in a.keys())
     except OSError:  # unreadable: render it again
         return False
 
@@ -445,7 +447,8 @@ def main(argv=None):
     if args.cmd == "render":
         from tqdm import tqdm
 
-        from .data.trajectory import CorruptDataError
+        from .data.trajectory import CorruptDataError, open_h5
+        from .observations import camera_size_name
 
         if args.workers < 1:
             ap.error("--workers must be >= 1")
@@ -468,12 +471,19 @@ def main(argv=None):
                 todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
         from .parallel import run_tasks
 
+        episodes = 0
+        for item in todo:
+            with open_h5(demo_set.trajectory(item[1])) as f:
+                episodes += len(f.keys())
+        size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
         try:
-            with tqdm(total=len(todo), desc=f"render {args.obs_mode}", unit="task") as bar:
+            with tqdm(total=episodes, desc=f"render {args.obs_mode}{size}", unit="episode") as bar:
                 for kind, value in run_tasks(_render_task, todo, args.workers):
-                    if kind == "result":
-                        bar.write(f"task {value[0]}: rendered {value[1]} episodes")
-                        bar.update()
+                    if kind == "message":
+                        bar.update(value)
+                    elif kind == "result":
+                        bar.write(f"task {value[0]}: {value[1]} episodes, {value[2]} rendered now, "
+                                  f"{value[1] - value[2]} kept from the previous rendering")
         except CorruptDataError as err:
             ap.error(str(err))
         return None

@@ -7,7 +7,9 @@
 # the episodes, the committed QC logs are copied out first and `generate` records their accepted
 # episodes again. Rounds of ROUND more accepted demos per task keep the tasks level if a session
 # ends early. Each task draws training seeds in order until it has ACCEPTED demos (the expert fails
-# on some seeds: pastry010 rocks in the basket after release), at most MAX_SEEDS seeds.
+# on some seeds: pastry010 rocks in the basket after release), at most MAX_SEEDS seeds. After each
+# round the new episodes are rendered (rgb+tactile, cameras at RENDER_SIZE, default 84x84: the cpu
+# baselines' input; RENDER_SIZE=none skips it); renderings, like the episodes, stay in the store.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}; MAX_SEEDS=${4:-250}
@@ -37,5 +39,9 @@ for ((n = ROUND; n < NUM + ROUND; n += ROUND)); do
   "$PY" -m mani_skill_softvt.demos generate --suite object_soft --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
     --out "$SOFTVT_DEMOS_DIR"
   "$PY" -m mani_skill_softvt.demos stats --suite object_soft --out "$SOFTVT_DEMOS_DIR" || true
+  if [ "${RENDER_SIZE:-84x84}" != none ]; then
+    "$PY" -m mani_skill_softvt.demos render --suite object_soft --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
+      --workers "$WORKERS" --out "$SOFTVT_DEMOS_DIR"
+  fi
   sync_back
 done

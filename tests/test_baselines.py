@@ -154,6 +154,18 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
         load_windows(cfg, tmp_path / "demos", None)
 
 
+def test_the_rendering_read_is_the_policys_size_or_the_smallest_larger_one():
+    from mani_skill_softvt.baselines.dataset import render_size_for
+
+    available = [(84, 84), (128, 128), (224, 224)]
+    assert render_size_for((84, 84), available) == (84, 84)
+    assert render_size_for((64, 64), available) == (84, 84)  # shrunk from the nearest larger
+    assert render_size_for((96, 96), available) == (128, 128)
+    assert render_size_for((96, 160), available) == (224, 224)
+    assert render_size_for((256, 256), available) == (256, 256)  # never enlarged: its file is missing
+    assert render_size_for((84, 84), []) == (84, 84)
+
+
 def test_training_reads_the_rendering_at_the_policys_camera_size_and_evaluation_renders_it_again(tmp_path):
     """Demos rendered at the policy's camera size are read as they are (no resizing), and the
     trained policy asks the evaluator for that size; trained on the native 224x224 rendering

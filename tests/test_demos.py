@@ -159,7 +159,7 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
     out, _ = dataset
     src = out / "object_soft" / "task3.h5"
     dst = tmp_path / "obs.h5"
-    assert render_observations(src, dst, "object_soft", 3, "state_dict") == 1
+    assert render_observations(src, dst, "object_soft", 3, "state_dict") == (1, 1)
     with h5py.File(src, "r") as f, h5py.File(dst, "r") as g:
         t = f["traj_0/actions"].shape[0]
         qpos = g["traj_0/obs/agent/qpos"][()]
@@ -234,22 +234,29 @@ def test_truncated_demo_files_are_named(dataset, tmp_path, capsys):
         assert f"{trajectory} is not a readable HDF5 file" in capsys.readouterr().err
 
 
+def _stored_episodes(path, episodes):
+    """A trajectory file of ``episodes`` = [(seed, length)]: actions and env states that differ per seed."""
+    with h5py.File(path, "w") as f:
+        for i, (seed, t) in enumerate(episodes):
+            g = f.create_group(f"traj_{i}")
+            g.attrs["seed"] = seed
+            g["actions"] = np.full((t, 7), seed, np.float32)
+            g["env_states/actors/cube"] = np.arange((t + 1) * 13, dtype=np.float32).reshape(t + 1, 13) + seed
+
+
 def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
-    import os
-
-    import h5py
-
+    from mani_skill_softvt.data.trajectory import episode_digest
     from mani_skill_softvt.demos import rendering_is_current
 
     traj, rendered = tmp_path / "task0.h5", tmp_path / "task0_rgb_tactile.h5"
-    with h5py.File(traj, "w") as f:
-        f.create_group("traj_0"), f.create_group("traj_1")
+    _stored_episodes(traj, [(7, 3), (8, 4)])
     assert not rendering_is_current(traj, rendered)
-    with h5py.File(rendered, "w") as f:
-        f.create_group("traj_0/obs")
+    with h5py.File(traj, "r") as a, h5py.File(rendered, "w") as b:
+        b.create_group("traj_0/obs").parent.attrs["states_sha256"] = episode_digest(a["traj_0"])
+        digest_1 = episode_digest(a["traj_1"])
     assert not rendering_is_current(traj, rendered)  # an episode is missing
     with h5py.File(rendered, "a") as f:
-        f.create_group("traj_1/obs")
+        f.create_group("traj_1/obs").parent.attrs["states_sha256"] = digest_1
     assert rendering_is_current(traj, rendered)
     assert not rendering_is_current(traj, rendered, needed=("tactile/left/depth",))  # from an older version
     assert not rendering_is_current(traj, rendered, tactile_model=2)  # no version kept: model 1
@@ -258,9 +265,32 @@ def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
             f[k].attrs["tactile_model"] = 2
     assert rendering_is_current(traj, rendered, tactile_model=2)
     assert not rendering_is_current(traj, rendered, tactile_model=3)
-    t = rendered.stat().st_mtime_ns
-    os.utime(traj, ns=(t + 10**9, t + 10**9))  # the trajectory file was rewritten after the rendering
+    _stored_episodes(traj, [(7, 3), (9, 4)])  # the second episode was recorded again: other states
     assert not rendering_is_current(traj, rendered)
+
+
+def test_a_grown_demo_set_renders_only_its_new_episodes(tmp_path):
+    """Episodes an earlier rendering holds from the same states are kept as they are; new or changed
+    ones are rendered; the file follows the trajectory's episode order."""
+    from mani_skill_softvt.data.trajectory import write_rendering
+
+    traj, out = tmp_path / "task0.h5", tmp_path / "task0_state.h5"
+    calls = []
+
+    def observe(seed, states):
+        calls.append(seed)
+        return [{"agent/qpos": row[:9] * 2} for row in states["actors/cube"]]
+
+    _stored_episodes(traj, [(7, 3), (8, 4)])
+    assert write_rendering(traj, out, "state", observe) == (2, 2) and calls == [7, 8]
+    with h5py.File(out, "r") as f:
+        first = f["traj_0/obs/agent/qpos"][()]
+    _stored_episodes(traj, [(5, 2), (7, 3), (8, 5)])  # a new seed first; seed 8 recorded again, longer
+    assert write_rendering(traj, out, "state", observe) == (3, 2) and calls == [7, 8, 5, 8]
+    with h5py.File(out, "r") as f:
+        assert [f[k].attrs["seed"] for k in ("traj_0", "traj_1", "traj_2")] == [5, 7, 8]
+        assert np.array_equal(f["traj_1/obs/agent/qpos"][()], first) and f["traj_2/obs/agent/qpos"].shape == (6, 9)
+    assert write_rendering(traj, out, "state", observe) == (3, 0)  # nothing new
 
 
 def test_the_committed_samples_were_recorded_under_the_current_physics():

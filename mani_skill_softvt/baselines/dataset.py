@@ -6,9 +6,10 @@ policy's inputs (:mod:`.features`) and keeps them in memory as arrays. Only poli
 are read, never the ``evaluator/`` group or the env states.
 
 The rendering with the cameras at the config's ``camera_size`` is read when every task has one
-(``demos render --camera-size 84x84``), else the native 224x224 one, shrunk. Which it was is
-kept (:attr:`DemoWindows.camera_render_size`, then in ``policy.pt``), and the evaluator renders
-the cameras at that size again, so a policy is evaluated on the images it was trained on.
+(``demos render --camera-size 84x84``), else the smallest larger one every task has (the native
+224x224 one at worst), shrunk. Which it was is kept (:attr:`DemoWindows.camera_render_size`,
+then in ``policy.pt``), and the evaluator renders the cameras at that size again, so a policy is
+evaluated on the images it was trained on.
 
 A sample is the step ``t`` of an episode: the observations of steps ``t-1, t`` (the first step
 repeats itself) and the actions ``t .. t+15`` (past the end, the last action repeats: the
@@ -34,7 +35,7 @@ from ..data.demo_set import DemoSet
 from ..data.trajectory import open_h5, tactile_model_of
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write
-from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, camera_sensor_configs, tactile_keys
+from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
 from .config import DPConfig
 from .features import frame_features
 
@@ -88,13 +89,23 @@ class DemoWindows:
         return obs, torch.from_numpy(self.actions[act_rows])
 
 
+def render_size_for(camera_size: tuple[int, int], available: list[tuple[int, int]]) -> tuple[int, int]:
+    """The camera size to read for a policy that takes ``camera_size``: that size if rendered, else
+    the smallest rendered size at least as large both ways (shrunk to it; never enlarged); the
+    policy's own size when none is (whose missing file then names the command that renders it)."""
+    h, w = camera_size
+    larger = [s for s in available if s[0] >= h and s[1] >= w]
+    if tuple(camera_size) in available or not larger:
+        return tuple(camera_size)
+    return min(larger, key=lambda s: (s[0] * s[1], s))
+
+
 def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
-    """(task, trajectory, rendering) of every task: the renderings at ``camera_size`` where every
-    task has one, else the native ones (see the module docstring)."""
+    """(task, trajectory, rendering) of every task, all at the camera size of :func:`render_size_for`
+    among the sizes every task is rendered at."""
     demo_set = DemoSet(demos_root, cfg.suite)
-    sized = camera_sensor_configs(cfg.camera_size) and all(
-        demo_set.rendered(t, OBS_MODE, cfg.camera_size).exists() for t in cfg.tasks)
-    pairs = demo_set.rendered_sources(list(cfg.tasks), OBS_MODE, cfg.camera_size if sized else None)
+    common = set.intersection(*(set(demo_set.rendered_sizes(t, OBS_MODE)) for t in cfg.tasks)) if cfg.tasks else set()
+    pairs = demo_set.rendered_sources(list(cfg.tasks), OBS_MODE, render_size_for(cfg.camera_size, sorted(common)))
     return [(task, p.trajectory_h5, p.rendered_h5) for task, p in zip(cfg.tasks, pairs)]
 
 

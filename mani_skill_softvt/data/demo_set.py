@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..fileio import read_jsonl
-from ..observations import camera_sensor_configs, camera_size_name
+from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs, camera_size_name
 from ..tasks.suites import NUM_TASKS, get_suite
 
 
@@ -83,6 +83,18 @@ class DemoSet:
         ``camera_size`` = (height, width) (None: the native 224x224)."""
         size = f"_{camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
         return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}{size}.h5"
+
+    def rendered_sizes(self, task_id: int, obs_mode: str) -> list[tuple[int, int]]:
+        """The camera sizes (height, width) the task's episodes are rendered at in ``obs_mode``."""
+        import re
+
+        stem = f"task{task_id}_{obs_mode.replace('+', '_')}"
+        sizes = [NATIVE_CAMERA_SIZE] if self.rendered(task_id, obs_mode).exists() else []
+        for p in self.dir.glob(f"{stem}_*x*.h5"):
+            m = re.fullmatch(rf"{re.escape(stem)}_(\d+)x(\d+)\.h5", p.name)
+            if m:
+                sizes.append((int(m[1]), int(m[2])))
+        return sorted(set(sizes))
 
     def renderings(self, task_id: int) -> list[Path]:
         """Every rendering of the task's episodes on disk, whatever its obs mode."""

@@ -13,6 +13,7 @@ contact and drop events) that never enters any observation, and the episode's ``
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -146,45 +147,74 @@ def tactile_model_of(episode_group) -> int:
     return int(episode_group.attrs.get("tactile_model", 1))
 
 
+def episode_digest(group) -> str:
+    """SHA-256 of a stored episode's env states and actions: everything its rendering depends on
+    (a rendered episode keeps the digest of its source, so an unchanged episode is never rendered twice)."""
+    arrays = {"actions": group["actions"]}
+    group["env_states"].visititems(lambda k, v: arrays.__setitem__(f"env_states/{k}", v)
+                                   if isinstance(v, h5py.Dataset) else None)
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key][()])
+        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def rendering_current(rendered_group, digest: str, needed: tuple[str, ...] = (), tactile_model: int | None = None) -> bool:
+    """Whether a rendered episode is the rendering of the episode with ``digest`` as this version
+    renders it: its source's digest, the ``needed`` observation keys (older renderings lack the
+    depth map) and, if given, frames of that ``tactile_model``."""
+    return (rendered_group.attrs.get("states_sha256") == digest and "obs" in rendered_group
+            and all(n in rendered_group["obs"] for n in needed)
+            and (tactile_model is None or tactile_model_of(rendered_group) == tactile_model))
+
+
 def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode,
-                    sensor_configs: dict | None = None) -> int:
-    """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many.
+                    sensor_configs: dict | None = None, needed: tuple[str, ...] = (), progress=None) -> tuple[int, int]:
+    """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many
+    episodes it holds and how many were rendered now.
 
     ``observe_episode(seed, states)`` restores each of an episode's recorded env states (flat
     ``env_states`` keys, (T+1, ...) arrays: reset + one per step) in order and returns one flat
     observation per state (:func:`mani_skill_softvt.demos.render_observations` does it with the
     env). Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside the episode's actions,
-    flags and attributes, and the trajectory's json is written beside it: ``out_h5`` is a
-    ManiSkill trajectory in ``obs_mode`` (with the ``sensor_configs`` the env rendered with in its
-    env kwargs, so ManiSkill's tools rebuild the same cameras). Written atomically; the source is
-    checked first.
+    flags and attributes (and its source's :func:`episode_digest`), and the trajectory's json is
+    written beside it: ``out_h5`` is a ManiSkill trajectory in ``obs_mode`` (with the
+    ``sensor_configs`` the env rendered with in its env kwargs, so ManiSkill's tools rebuild the
+    same cameras). An episode that a previous ``out_h5`` already holds as current
+    (:func:`rendering_current` with ``needed``) is copied from it, not rendered again: a demo set
+    that grew renders only its new episodes. Written atomically; the source is checked first.
+    ``progress(1)`` is called per episode.
     """
     problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
     if problem:
         raise CorruptDataError(problem)
-    n = 0
+    tactile_model = TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
+    n = rendered = 0
 
     def write(tmp: Path):
-        nonlocal n
-        with h5py.File(trajectory_h5, "r") as src, h5py.File(tmp, "w") as dst:
-            for name in sorted(src.keys(), key=lambda k: int(k.split("_")[1])):
-                g = src[name]
-                states = {}
-                g["env_states"].visititems(lambda k, v: states.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
-                steps = {len(v) for v in states.values()}  # one state per step in every group
-                if len(steps) != 1:
-                    raise CorruptDataError(f"{trajectory_h5}:{name}: env_states groups differ in length {sorted(steps)}")
-                frames = observe_episode(int(g.attrs["seed"]), states)
-                out = dst.create_group(name)
-                out.attrs.update(dict(g.attrs))  # seed, instruction, closure, ...
-                for k in MANISKILL_STEP_KEYS:  # a ManiSkill trajectory in this obs mode, loadable by its tools
-                    if k in g:
-                        _dataset(out, k, g[k][()])
-                if "tactile" in obs_mode:
-                    out.attrs["tactile_model"] = TACTILE_MODEL_VERSION
-                for k in frames[0]:
-                    _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
-                n += 1
+        nonlocal n, rendered
+        previous = _open_previous(out_h5)
+        try:
+            old = {} if previous is None else {previous[k].attrs.get("states_sha256"): k for k in previous.keys()}
+            with h5py.File(trajectory_h5, "r") as src, h5py.File(tmp, "w") as dst:
+                for name in sorted(src.keys(), key=lambda k: int(k.split("_")[1])):
+                    g = src[name]
+                    digest = episode_digest(g)
+                    if digest in old and rendering_current(previous[old[digest]], digest, needed, tactile_model):
+                        previous.copy(previous[old[digest]], dst, name=name)  # raw chunks: no re-compression
+                        dst[name].attrs.update(dict(g.attrs))
+                    else:
+                        _render_episode(trajectory_h5, name, g, dst, obs_mode, observe_episode, tactile_model)
+                        dst[name].attrs["states_sha256"] = digest
+                        rendered += 1
+                    n += 1
+                    if progress is not None:
+                        progress(1)
+        finally:
+            if previous is not None:
+                previous.close()
 
     atomic_write(out_h5, write)
     meta_path = Path(trajectory_h5).with_suffix(".json")
@@ -195,4 +225,34 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
         if sensor_configs:
             env_kwargs["sensor_configs"] = {**env_kwargs.get("sensor_configs", {}), **sensor_configs}
         atomic_write_json(Path(out_h5).with_suffix(".json"), meta)
-    return n
+    return n, rendered
+
+
+def _open_previous(out_h5: Path):
+    """The rendering being replaced, open for reading; None if there is none or it is unreadable
+    (then every episode is rendered again)."""
+    if not Path(out_h5).exists():
+        return None
+    try:
+        return h5py.File(out_h5, "r")
+    except OSError:
+        return None
+
+
+def _render_episode(trajectory_h5: Path, name: str, g, dst, obs_mode: str, observe_episode, tactile_model) -> None:
+    """Render the stored episode ``g`` into the group ``name`` of ``dst`` (see :func:`write_rendering`)."""
+    states = {}
+    g["env_states"].visititems(lambda k, v: states.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
+    steps = {len(v) for v in states.values()}  # one state per step in every group
+    if len(steps) != 1:
+        raise CorruptDataError(f"{trajectory_h5}:{name}: env_states groups differ in length {sorted(steps)}")
+    frames = observe_episode(int(g.attrs["seed"]), states)
+    out = dst.create_group(name)
+    out.attrs.update(dict(g.attrs))  # seed, instruction, closure, ...
+    for k in MANISKILL_STEP_KEYS:  # a ManiSkill trajectory in this obs mode, loadable by its tools
+        if k in g:
+            _dataset(out, k, g[k][()])
+    if tactile_model is not None:
+        out.attrs["tactile_model"] = tactile_model
+    for k in frames[0]:
+        _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
