@@ -471,12 +471,12 @@ def main(argv=None):
                 todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
         from .parallel import run_tasks
 
-        episodes = 0
-        for item in todo:
-            with open_h5(demo_set.trajectory(item[1])) as f:
-                episodes += len(f.keys())
         size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
         try:
+            episodes = 0
+            for item in todo:
+                with open_h5(demo_set.trajectory(item[1])) as f:
+                    episodes += len(f.keys())
             with tqdm(total=episodes, desc=f"render {args.obs_mode}{size}", unit="episode") as bar:
                 for kind, value in run_tasks(_render_task, todo, args.workers):
                     if kind == "message":
