@@ -262,6 +262,46 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
     assert error(trained) < 0.4 * error(untrained), (error(trained), error(untrained))
 
 
+def test_action_errors_measure_distance_rotation_angle_and_closure():
+    from scipy.spatial.transform import Rotation
+
+    from mani_skill_softvt.baselines.openloop import action_errors
+
+    target = np.r_[0.5, 0.0, 0.2, down_rotvec(0.3), 0.4][None]
+    pred = target.copy()
+    pred[0, :3] += [0.003, 0.004, 0.0]  # 5 mm
+    turned = Rotation.from_rotvec(target[0, 3:6]) * Rotation.from_rotvec([0.0, 0.0, np.radians(10)])
+    pred[0, 3:6] = turned.as_rotvec()
+    pred[0, 6] = 0.9
+    e = action_errors(pred, target)
+    np.testing.assert_allclose(e["position_m"], [0.005], atol=1e-12)
+    np.testing.assert_allclose(e["rotation_rad"], [np.radians(10)], atol=1e-9)
+    np.testing.assert_allclose(e["gripper"], [0.5], atol=1e-12)
+    # The half turn's two axis-angle branches are one orientation: no error across the jump.
+    flipped = target.copy()
+    r = target[0, 3:6]
+    flipped[0, 3:6] = r - 2 * np.pi * r / np.linalg.norm(r)
+    assert action_errors(flipped, target)["rotation_rad"][0] < 1e-9
+
+
+def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tmp_path):
+    from mani_skill_softvt.baselines.openloop import main as openloop_main, replan_indices
+
+    _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
+    cfg = make_config("vo-c", **{**TINY, "heldout_per_task": 1})
+    train = load_windows(cfg, tmp_path / "demos", None)
+    held = load_windows(cfg, tmp_path / "demos", None, heldout=True)
+    assert (train.episodes, len(train), held.episodes, len(held)) == (2, 15, 1, 7)
+    assert list(replan_indices(held, 8)) == [0] and list(replan_indices(train, 8)) == [0, 8, 9]
+    path = T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False)
+    result = openloop_main([str(path), "--demos", str(tmp_path / "demos"), "--threads", "1"])
+    assert result["heldout"]["windows"] == 1 and result["training"]["windows"] == 3
+    assert json.loads((tmp_path / "run" / "openloop.json").read_text())["episodes_heldout"] == 1
+    untouched = T.train(make_config("vo-c", **TINY), tmp_path / "demos", tmp_path / "all", progress=False)
+    with pytest.raises(SystemExit):
+        openloop_main([str(untouched), "--demos", str(tmp_path / "demos")])
+
+
 # ------------------------------------------------------------------------------------- agent
 
 def _env_obs(rng, tactile: bool) -> dict:

@@ -95,7 +95,8 @@ class DPConfig:
     # -- data
     suite: str = "object_soft"
     tasks: tuple[int, ...] = tuple(range(10))
-    demos_per_task: int | None = None  # None: every accepted demo on disk
+    demos_per_task: int | None = None  # None: every accepted demo on disk (but the held-out ones)
+    heldout_per_task: int = 0  # the last demos of each task, never trained on: the open-loop check's (openloop.py)
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
@@ -110,6 +111,8 @@ class DPConfig:
             raise ValueError(f"action_steps {self.action_steps} must be within 1..action_horizon {self.action_horizon}")
         if len(self.encoder_widths) != len(self.encoder_blocks):
             raise ValueError("encoder_widths and encoder_blocks need one entry per ResNet stage")
+        if self.heldout_per_task < 0:
+            raise ValueError(f"heldout_per_task {self.heldout_per_task} must be >= 0")
         if self.inference_timesteps > self.train_timesteps:
             raise ValueError(f"inference_timesteps {self.inference_timesteps} > train_timesteps {self.train_timesteps}")
 
@@ -181,7 +184,7 @@ def parse_override(text: str) -> tuple[str, object]:
             return key, raw.lower() in ("1", "true", "yes")
         if key in ("epochs",):
             return key, float(raw)
-        if key in ("steps", "demos_per_task"):
+        if key in ("steps", "demos_per_task", "heldout_per_task"):
             return key, int(raw)
         return key, type(default)(raw) if default is not None else raw
     except ValueError as e:

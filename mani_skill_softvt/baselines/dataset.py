@@ -42,7 +42,7 @@ from .features import frame_features
 OBS_MODE = "rgb+tactile"
 # Config fields that change the prepared arrays (anything else, e.g. the optimiser, does not).
 INPUT_FIELDS = ("variant", "camera_size", "tactile_size", "tactile_inputs", "depth_scale_um", "suite", "tasks",
-                "demos_per_task")
+                "demos_per_task", "heldout_per_task")
 
 
 @dataclass
@@ -119,8 +119,16 @@ def _episode_names(f) -> list[str]:
     return sorted((k for k in f.keys() if k.startswith("traj_")), key=lambda k: int(k.split("_")[1]))
 
 
-def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
-    """Read the demonstrations into :class:`DemoWindows` (see the module docstring)."""
+def split_episodes(names: list[str], cfg: DPConfig, heldout: bool = False) -> list[str]:
+    """A task's episodes a run trains on (the first ``demos_per_task``, the last ``heldout_per_task``
+    set aside), or with ``heldout`` those set aside: the two never overlap."""
+    cut = max(0, len(names) - cfg.heldout_per_task)
+    return names[cut:] if heldout else names[:cut][:cfg.demos_per_task]
+
+
+def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> DemoWindows:
+    """Read the demonstrations into :class:`DemoWindows` (see the module docstring): the training
+    episodes, or with ``heldout`` the held-out ones (:func:`split_episodes`)."""
     frames: dict[str, list[np.ndarray]] = {}
     actions, obs_starts, act_starts = [], [0], [0]
     render_sizes = set()
@@ -129,7 +137,7 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
     with tqdm(total=len(sources), desc="prepare demos", unit="task") as bar:
         for task, traj, rendered in sources:
             with open_h5(traj) as ft, open_h5(rendered) as fr:
-                names = _episode_names(ft)[:cfg.demos_per_task]
+                names = split_episodes(_episode_names(ft), cfg, heldout)
                 for name in names:
                     if name not in fr or "obs" not in fr[name]:
                         raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
@@ -163,7 +171,8 @@ def prepare(cfg: DPConfig, demos_root: Path) -> DemoWindows:
                     act_starts.append(act_starts[-1] + len(a))
             bar.update()
     if not actions:
-        raise ValueError(f"no demonstrations found for tasks {cfg.tasks} of {cfg.suite} under {demos_root}")
+        which = "held-out demonstrations (heldout_per_task)" if heldout else "demonstrations"
+        raise ValueError(f"no {which} found for tasks {cfg.tasks} of {cfg.suite} under {demos_root}")
     size = tuple(int(v) for v in render_sizes.pop()) if render_sizes else NATIVE_CAMERA_SIZE
     return DemoWindows({k: np.stack(v) for k, v in frames.items()}, np.concatenate(actions),
                        np.asarray(obs_starts), np.asarray(act_starts), cfg, camera_render_size=size)
@@ -174,16 +183,16 @@ def _needed_keys(cfg: DPConfig) -> list[str]:
     return keys + (tactile_keys() if cfg.tactile else [])
 
 
-def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None) -> DemoWindows:
+def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: bool = False) -> DemoWindows:
     """:func:`prepare`, through the cache file ``cache`` when given (rebuilt if its key differs)."""
-    key = cache_key(cfg, _sources(cfg, demos_root))
+    key = cache_key(cfg, _sources(cfg, demos_root)) + ("-heldout" if heldout else "")
     if cache is not None and cache.exists():
         with np.load(cache, allow_pickle=False) as z:
             if str(z["key"]) == key and "camera_render_size" in z.files:
                 frames = {k[len("frame/"):]: z[k] for k in z.files if k.startswith("frame/")}
                 return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg, key,
                                    tuple(int(v) for v in z["camera_render_size"]))
-    windows = prepare(cfg, demos_root)
+    windows = prepare(cfg, demos_root, heldout)
     windows.key = key
     if cache is not None:
         arrays = {f"frame/{k}": v for k, v in windows.frames.items()}

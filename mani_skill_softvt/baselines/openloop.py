@@ -1,0 +1,133 @@
+"""Open-loop error of a trained baseline on held-out demonstrations: the recipe search's cheap measure.
+
+    python -m mani_skill_softvt.baselines.openloop outputs/baselines/object_soft/vo-c-cpu/policy.pt
+
+A run trained with ``--set heldout_per_task=N`` never saw the last N demos of each task. At every
+step where the agent would replan (every ``action_steps`` steps of an episode), the policy
+denoises a chunk from the demo's own observations, and its executed actions are compared with
+the expert's: the TCP position error (mm), the rotation between the two orientations (degrees)
+and the gripper closure error, on the held-out demos and, for comparison, on as many training
+windows. A policy whose held-out chunks are centimetres off will not grasp in closed loop; one
+close to its training error generalises. Closed-loop TSR (``evaluate``) is the measure that
+decides; this one costs seconds instead of hours. Writes ``openloop.json`` beside the policy.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ..fileio import atomic_write_json
+from ..paths import DEMOS_DIR
+from .dataset import DemoWindows, load_windows
+
+GRIPPER = 6
+
+
+def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
+    """Per action of (..., 7) base-frame actions (xyz, axis-angle, closure): the position error (m),
+    the angle of the rotation between the two orientations (rad) and the closure error."""
+    from scipy.spatial.transform import Rotation
+
+    pred, target = np.asarray(pred, np.float64), np.asarray(target, np.float64)
+    shape = pred.shape[:-1]
+    rel = Rotation.from_rotvec(pred[..., 3:6].reshape(-1, 3)).inv() * Rotation.from_rotvec(target[..., 3:6].reshape(-1, 3))
+    return {"position_m": np.linalg.norm(pred[..., :3] - target[..., :3], axis=-1),
+            "rotation_rad": rel.magnitude().reshape(shape),
+            "gripper": np.abs(pred[..., GRIPPER] - target[..., GRIPPER])}
+
+
+def replan_indices(windows: DemoWindows, every: int, limit: int | None = None) -> np.ndarray:
+    """The global step indices where the agent replans (steps 0, every, 2 every, ... of each
+    episode), thinned evenly to at most ``limit``."""
+    out = np.concatenate([np.arange(a, b, every) for a, b in zip(windows.act_starts[:-1], windows.act_starts[1:])])
+    if limit is not None and len(out) > limit:
+        out = out[np.linspace(0, len(out) - 1, limit).round().astype(int)]
+    return out
+
+
+def chunk_errors(model, windows: DemoWindows, indices: np.ndarray, seed: int = 0, batch: int = 64,
+                 progress: bool = True) -> dict[str, np.ndarray]:
+    """:func:`action_errors` of the executed part (``action_steps``) of the chunks the model
+    denoises at ``indices`` against the demonstrated actions; arrays (len(indices), action_steps)."""
+    from .model import noise_scheduler
+
+    cfg = model.cfg
+    scheduler = noise_scheduler(cfg, inference=True)
+    generator = torch.Generator().manual_seed(seed)
+    parts = []
+    for i in tqdm(range(0, len(indices), batch), desc="open loop", unit="batch", disable=not progress, leave=False):
+        obs, act = windows.batch(indices[i:i + batch])
+        chunk = model.sample(obs, generator, scheduler).numpy()
+        parts.append(action_errors(chunk[:, :cfg.action_steps], act[:, :cfg.action_steps].numpy()))
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def summarize_errors(errors: dict[str, np.ndarray]) -> dict[str, float]:
+    """Means and medians in readable units (mm, degrees, closure), over all executed actions, and
+    of the first action of each chunk (what the policy commits to next)."""
+    pos, rot, grip = errors["position_m"] * 1e3, np.degrees(errors["rotation_rad"]), errors["gripper"]
+    return {"windows": int(pos.shape[0]),
+            "position_mm_mean": float(pos.mean()), "position_mm_median": float(np.median(pos)),
+            "position_mm_first_action": float(pos[:, 0].mean()),
+            "rotation_deg_mean": float(rot.mean()), "gripper_mean": float(grip.mean())}
+
+
+def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, threads: int = 2,
+             progress: bool = True) -> dict:
+    """Held-out and training open-loop errors of a ``policy.pt`` (see the module docstring)."""
+    from .agent import load_policy_file
+    from .train import CACHE
+
+    policy_path = Path(policy_path)
+    cfg, model, ckpt = load_policy_file(policy_path)
+    if cfg.heldout_per_task < 1:
+        raise ValueError(f"{policy_path} was trained on every demo (heldout_per_task=0): nothing is held out. Train "
+                         "with `--set heldout_per_task=10` (the last 10 demos of each task are then never trained on)")
+    torch.set_num_threads(threads)
+    run = policy_path.parent
+    heldout = load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True)
+    training = load_windows(cfg, demos_root, run / CACHE)
+    out = {"policy": str(policy_path), "steps": ckpt.get("steps"), "episodes_trained": training.episodes,
+           "episodes_heldout": heldout.episodes, "camera_render_size": list(heldout.camera_render_size)}
+    for name, windows in (("heldout", heldout), ("training", training)):
+        idx = replan_indices(windows, cfg.action_steps, limit)
+        out[name] = summarize_errors(chunk_errors(model, windows, idx, seed=cfg.seed, progress=progress))
+    atomic_write_json(run / "openloop.json", out)
+    return out
+
+
+def format_openloop(result: dict) -> str:
+    head = f"{'demos':>9}  {'windows':>7}  {'pos mm':>7}  {'median':>7}  {'1st act':>7}  {'rot deg':>7}  {'gripper':>7}"
+    lines = [f"{result['policy']} ({result['steps']} steps; {result['episodes_trained']} demos trained on, "
+             f"{result['episodes_heldout']} held out)", head]
+    for name in ("heldout", "training"):
+        r = result[name]
+        lines.append(f"{name:>9}  {r['windows']:>7d}  {r['position_mm_mean']:7.1f}  {r['position_mm_median']:7.1f}  "
+                     f"{r['position_mm_first_action']:7.1f}  {r['rotation_deg_mean']:7.2f}  {r['gripper_mean']:7.3f}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.openloop", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("policy", type=Path, help="a policy.pt of a run trained with heldout_per_task > 0")
+    ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
+    ap.add_argument("--windows", type=int, default=500, help="at most this many replanning steps per set")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    try:
+        result = openloop(args.policy, args.demos, args.windows, args.threads)
+    except (FileNotFoundError, ValueError) as e:
+        ap.error(str(e))
+    print(format_openloop(result))
+    print(f"written: {args.policy.parent / 'openloop.json'}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
