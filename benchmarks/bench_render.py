@@ -42,7 +42,7 @@ def time_obs(env, frames: int) -> float:
 def pickcube_obs(size: int, frames: int) -> float:
     import mani_skill.envs  # noqa: F401
 
-    env = gym.make("PickCube-v1", obs_mode="rgb", sensor_configs=dict(width=size, height=size))
+    env = gym.make("PickCube-v1", obs_mode="rgb", sensor_configs={"width": size, "height": size})
     env.reset(seed=0)
     ms = time_obs(env, frames)
     env.close()
@@ -81,14 +81,15 @@ def main(argv=None) -> list[dict]:
     args = ap.parse_args(argv)
     sizes = (224, args.size)
     base = {s: pickcube_obs(s, args.frames) for s in sizes}
-    rows = [dict(what="obs PickCube-v1 (1 camera)", size=s, ms=base[s], ratio=1.0) for s in sizes]
+    rows = [{"what": "obs PickCube-v1 (1 camera)", "size": s, "ms": base[s], "ratio": 1.0} for s in sizes]
     for mode in ("rgb", "rgb+tactile"):
         for s in sizes:
             ms = softvt_obs(mode, s, args.frames)
-            rows.append(dict(what=f"obs Object-Soft {mode} (2 cameras)", size=s, ms=ms, ratio=ms / 2 / base[s]))
+            rows.append({"what": f"obs Object-Soft {mode} (2 cameras)", "size": s, "ms": ms, "ratio": ms / 2 / base[s]})
     for s in sizes:
         ms, frames = demo_render(s)
-        rows.append(dict(what=f"demo render rgb+tactile ({frames} frames)", size=s, ms=ms, ratio=ms / 2 / base[s]))
+        rows.append({"what": f"demo render rgb+tactile ({frames} frames)", "size": s, "ms": ms,
+                     "ratio": ms / 2 / base[s]})
     by = {(r["what"], r["size"]): r["ms"] for r in rows}
     print(f"{'':44s} {'camera':>7s} {'ms':>8s} {'ratio':>7s} {'saved':>7s}")
     for r in rows:

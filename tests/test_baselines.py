@@ -285,7 +285,8 @@ def test_action_errors_measure_distance_rotation_angle_and_closure():
 
 
 def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tmp_path):
-    from mani_skill_softvt.baselines.openloop import main as openloop_main, replan_indices
+    from mani_skill_softvt.baselines.openloop import main as openloop_main
+    from mani_skill_softvt.baselines.openloop import replan_indices
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     cfg = make_config("vo-c", **{**TINY, "heldout_per_task": 1})

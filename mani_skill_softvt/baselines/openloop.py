@@ -103,8 +103,9 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
 
 def format_openloop(result: dict) -> str:
     head = f"{'demos':>9}  {'windows':>7}  {'pos mm':>7}  {'median':>7}  {'1st act':>7}  {'rot deg':>7}  {'gripper':>7}"
-    lines = [f"{result['policy']} ({result['steps']} steps; {result['episodes_trained']} demos trained on, "
-             f"{result['episodes_heldout']} held out)", head]
+    title = (f"{result['policy']} ({result['steps']} steps; {result['episodes_trained']} demos trained on, "
+             f"{result['episodes_heldout']} held out)")
+    lines = [title, head]
     for name in ("heldout", "training"):
         r = result[name]
         lines.append(f"{name:>9}  {r['windows']:>7d}  {r['position_mm_mean']:7.1f}  {r['position_mm_median']:7.1f}  "

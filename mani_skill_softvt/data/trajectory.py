@@ -197,7 +197,7 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
         nonlocal n, rendered
         previous = _open_previous(out_h5)
         try:
-            old = {} if previous is None else {previous[k].attrs.get("states_sha256"): k for k in previous.keys()}
+            old = {} if previous is None else {previous[k].attrs.get("states_sha256"): k for k in previous}
             with h5py.File(trajectory_h5, "r") as src, h5py.File(tmp, "w") as dst:
                 for name in sorted(src.keys(), key=lambda k: int(k.split("_")[1])):
                     g = src[name]
