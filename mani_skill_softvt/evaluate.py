@@ -74,8 +74,11 @@ def main(argv=None) -> dict:
     if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
         print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
     eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
-    # A file name, also for ws://host:port; a trained baseline is named by its run directory (vo-c-cpu).
-    tag_source = Path(args.policy).parent.name if args.policy.endswith(".pt") else args.policy
+    # A file name, also for ws://host:port; a trained baseline is named by its run directory
+    # (vo-c-cpu), a snapshot by its file (vo-c-cpu_step003000).
+    tag_source = args.policy
+    if args.policy.endswith(".pt"):
+        tag_source = Path(args.policy).parent.name if Path(args.policy).name == "policy.pt" else Path(args.policy).stem
     policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", tag_source).strip("_")
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")

@@ -213,6 +213,23 @@ def test_random_shift_moves_whole_frames_within_the_pad():
 random_shift = T.random_shift
 
 
+def test_a_time_budget_stops_at_a_checkpoint_and_snapshots_are_policies(tmp_path):
+    _write_demos(tmp_path / "demos")
+    cfg = make_config("vo-c", **TINY)  # 6 steps, a checkpoint every 2
+    run = tmp_path / "run"
+    T.train(cfg, tmp_path / "demos", run, progress=False, deadline=0.0, snapshot_every=2)  # the budget is spent
+    assert torch.load(run / T.CHECKPOINT, weights_only=False)["step"] == 2 and not (run / T.POLICY).exists()
+    path = T.train(cfg, tmp_path / "demos", run, progress=False, snapshot_every=2)
+    snaps = [T.snapshot_path(run, k) for k in (2, 4, 6)]
+    assert sorted((run / "snapshots").iterdir()) == snaps and snaps[0].name == "run_step000002.pt"
+    files = [torch.load(p, weights_only=False) for p in snaps]
+    assert [f["steps"] for f in files] == [2, 4, 6]
+    assert 0 < files[0]["train_wall_s"] < files[1]["train_wall_s"] < files[2]["train_wall_s"]
+    final = torch.load(path, weights_only=False)
+    assert all(torch.equal(final["model"][k], files[2]["model"][k]) for k in final["model"])
+    assert load_policy(str(snaps[1])).name == load_policy(str(path)).name  # a snapshot is a policy
+
+
 def test_training_resumes_bit_for_bit(tmp_path):
     _write_demos(tmp_path / "demos")
     cfg = make_config("vt-c", **TINY)

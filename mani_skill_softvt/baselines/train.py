@@ -10,6 +10,8 @@ Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (
   losses), rewritten atomically every ``checkpoint_every`` steps; re-running the same command
   continues from it, and the result is bit for bit the one an uninterrupted run gives;
 - ``policy.pt``: the EMA weights and the config, what ``evaluate --policy <path>`` loads;
+- with ``--snapshot-every N``, ``snapshots/<run>_step<k>.pt``: the same at every N-th step (a
+  policy each, for curves of error or TSR against training time);
 - ``loss.png``: the training loss; ``data_cache.npz``: the prepared demonstrations.
 """
 
@@ -100,12 +102,13 @@ class Training:
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step = 0
         self.losses: list[float] = []
+        self.wall_s = 0.0  # training time so far, over every call that resumed the run
 
     def state(self, data_key: str) -> dict:
         return {"config": self.cfg.to_dict(), "steps": self.steps, "data_key": data_key, "step": self.step, "model": self.model.state_dict(),
                 "ema": self.ema.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "lr_schedule": self.lr_schedule.state_dict(), "generator": self.generator.get_state(),
-                "losses": self.losses}
+                "losses": self.losses, "wall_s": self.wall_s}
 
     def load(self, ckpt: dict) -> None:
         self.model.load_state_dict(ckpt["model"])
@@ -114,6 +117,7 @@ class Training:
         self.lr_schedule.load_state_dict(ckpt["lr_schedule"])
         self.generator.set_state(ckpt["generator"])
         self.step, self.losses = int(ckpt["step"]), list(ckpt["losses"])
+        self.wall_s = float(ckpt.get("wall_s", 0.0))
 
     def train_step(self, windows: DemoWindows) -> float:
         obs, actions = windows.batch(batch_indices(self.cfg, len(windows), self.step))
@@ -139,6 +143,14 @@ class Training:
         model.load_state_dict(self.model.state_dict())
         self.ema.copy_to(model.parameters())
         return {k: v.cpu() for k, v in model.state_dict().items()}
+
+    def policy_file(self, windows: DemoWindows) -> dict:
+        """What a ``policy.pt`` (or a snapshot) holds: the config, the EMA weights at this step and
+        what they were trained on."""
+        return {"config": self.cfg.to_dict(), "model": self.policy_state(), "steps": self.step,
+                "tactile_model": TACTILE_MODEL_VERSION if self.cfg.tactile else None,
+                "episodes": windows.episodes, "samples": len(windows),
+                "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s}
 
 
 def save(path: Path, obj: dict) -> None:
@@ -193,9 +205,18 @@ def plot_losses(losses: list[float], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = None, progress: bool = True) -> Path:
+def snapshot_path(out: Path, step: int) -> Path:
+    """Where the snapshot policy of step ``step`` of the run in ``out`` goes (named after the run,
+    so that its evaluation records are too)."""
+    return Path(out) / "snapshots" / f"{Path(out).name}_step{step:06d}.pt"
+
+
+def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = None, progress: bool = True,
+          deadline: float | None = None, snapshot_every: int | None = None) -> Path:
     """Train (or resume) the run in ``out``; returns the path of ``policy.pt``. ``stop_after``
-    ends this call after that many optimiser steps (the run resumes later)."""
+    ends this call after that many optimiser steps, ``deadline`` (``time.monotonic()``) at the
+    first checkpoint after it (the run resumes later, the same as an uninterrupted one).
+    ``snapshot_every`` keeps a snapshot policy every that many steps (:func:`snapshot_path`)."""
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
     out = Path(out)
@@ -211,21 +232,22 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
     if ckpt is not None:
         run.load(ckpt)
     end = steps if stop_after is None else min(steps, run.step + stop_after)
-    t0 = time.perf_counter()
     with tqdm(total=steps, initial=run.step, desc=f"train {cfg.variant}", unit="step", disable=not progress) as bar:
         while run.step < end:
+            t0 = time.perf_counter()
             loss = run.train_step(windows)
+            run.wall_s += time.perf_counter() - t0
             bar.update()
             bar.set_postfix(loss=f"{loss:.4f}")
+            if snapshot_every and run.step % snapshot_every == 0:
+                save(snapshot_path(out, run.step), run.policy_file(windows))
             if run.step % cfg.checkpoint_every == 0 or run.step == end:
                 save(ckpt_path, run.state(windows.key))
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
     policy_path = out / POLICY
     if run.step == steps:
-        save(policy_path, {"config": cfg.to_dict(), "model": run.policy_state(), "steps": steps,
-                           "tactile_model": TACTILE_MODEL_VERSION if cfg.tactile else None,
-                           "episodes": windows.episodes, "samples": len(windows),
-                           "camera_render_size": list(windows.camera_render_size),
-                           "train_wall_s_last_call": time.perf_counter() - t0})
+        save(policy_path, run.policy_file(windows))
         plot_losses(run.losses, out / "loss.png", f"{cfg.variant} ({cfg.preset}), {windows.episodes} demos")
     return policy_path
 
@@ -237,13 +259,15 @@ def main(argv=None) -> Path:
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields (DPConfig)")
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--snapshot-every", type=int, default=None, metavar="N",
+                    help="also keep the policy of every N-th step (snapshots/), for curves against training time")
     args = ap.parse_args(argv)
     try:
         cfg = make_config(args.variant, args.config, **dict(parse_override(s) for s in args.set))
     except ValueError as e:
         ap.error(str(e))
     out = args.out or default_out(cfg)
-    path = train(cfg, args.demos, out)
+    path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every)
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
     return path
 
