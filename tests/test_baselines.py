@@ -320,6 +320,26 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
         openloop_main([str(untouched), "--demos", str(tmp_path / "demos")])
 
 
+def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(tmp_path, monkeypatch, capsys):
+    from mani_skill_softvt.baselines import search
+
+    _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
+    monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
+    argv = ["--recipes", "tiny", "--heldout", "1", "--snapshot-every", "2", "--demos", str(tmp_path / "demos"),
+            "--runs", str(tmp_path / "runs"), "--results", str(tmp_path / "results")]
+    search.main(argv + ["--budget-min", "0"])  # the budget is spent at the first checkpoint
+    assert "ran out" in capsys.readouterr().out
+    assert [r["step"] for r in search.measured("vo-c", tmp_path / "results").values()] == [2]
+    search.main(argv)  # resumes, measures the later snapshots only
+    rows = search.measured("vo-c", tmp_path / "results")
+    assert sorted(rows) == [("tiny", 2), ("tiny", 4), ("tiny", 6)]
+    assert all(r["episodes_heldout"] == 1 and r["episodes_trained"] == 2 for r in rows.values())
+    assert rows[("tiny", 6)]["train_wall_s"] >= rows[("tiny", 2)]["train_wall_s"]
+    search.main(argv)  # nothing new
+    assert len((tmp_path / "results" / "vo-c.jsonl").read_text().splitlines()) == 3
+    assert "| tiny | 6 |" in search.main(["--results", str(tmp_path / "results"), "--table"])
+
+
 # ------------------------------------------------------------------------------------- agent
 
 def _env_obs(rng, tactile: bool) -> dict:

@@ -77,9 +77,17 @@ def summarize_errors(errors: dict[str, np.ndarray]) -> dict[str, float]:
             "rotation_deg_mean": float(rot.mean()), "gripper_mean": float(grip.mean())}
 
 
+def run_dir_of(policy_path: Path) -> Path:
+    """The run directory of a ``policy.pt`` or of one of its snapshots (``<run>/snapshots/*.pt``):
+    where the run's prepared data lies."""
+    parent = Path(policy_path).parent
+    return parent.parent if parent.name == "snapshots" else parent
+
+
 def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, threads: int = 2,
-             progress: bool = True) -> dict:
-    """Held-out and training open-loop errors of a ``policy.pt`` (see the module docstring)."""
+             progress: bool = True, write: bool = True) -> dict:
+    """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
+    docstring); ``write`` puts them in ``openloop.json`` beside it."""
     from .agent import load_policy_file
     from .train import CACHE
 
@@ -89,7 +97,7 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
         raise ValueError(f"{policy_path} was trained on every demo (heldout_per_task=0): nothing is held out. Train "
                          "with `--set heldout_per_task=10` (the last 10 demos of each task are then never trained on)")
     torch.set_num_threads(threads)
-    run = policy_path.parent
+    run = run_dir_of(policy_path)
     heldout = load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True)
     training = load_windows(cfg, demos_root, run / CACHE)
     out = {"policy": str(policy_path), "steps": ckpt.get("steps"), "episodes_trained": training.episodes,
@@ -97,7 +105,8 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
     for name, windows in (("heldout", heldout), ("training", training)):
         idx = replan_indices(windows, cfg.action_steps, limit)
         out[name] = summarize_errors(chunk_errors(model, windows, idx, seed=cfg.seed, progress=progress))
-    atomic_write_json(run / "openloop.json", out)
+    if write:
+        atomic_write_json(policy_path.parent / "openloop.json", out)
     return out
 
 
