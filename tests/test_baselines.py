@@ -311,6 +311,12 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
     held = load_windows(cfg, tmp_path / "demos", None, heldout=True)
     assert (train.episodes, len(train), held.episodes, len(held)) == (2, 15, 1, 7)
     assert list(replan_indices(held, 8)) == [0] and list(replan_indices(train, 8)) == [0, 8, 9]
+    from mani_skill_softvt.baselines.dataset import split_episodes
+
+    names = [f"traj_{i}" for i in range(40)]
+    fixed = make_config("vo-c", demos_per_task=30, heldout_per_task=5)
+    assert split_episodes(names, fixed) == names[:30] and split_episodes(names, fixed, heldout=True) == names[30:35]
+    assert split_episodes(names + ["traj_40"], fixed, heldout=True) == names[30:35]  # the set grew: the same split
     path = T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False)
     result = openloop_main([str(path), "--demos", str(tmp_path / "demos"), "--threads", "1"])
     assert result["heldout"]["windows"] == 1 and result["training"]["windows"] == 3

@@ -120,10 +120,13 @@ def _episode_names(f) -> list[str]:
 
 
 def split_episodes(names: list[str], cfg: DPConfig, heldout: bool = False) -> list[str]:
-    """A task's episodes a run trains on (the first ``demos_per_task``, the last ``heldout_per_task``
-    set aside), or with ``heldout`` those set aside: the two never overlap."""
-    cut = max(0, len(names) - cfg.heldout_per_task)
-    return names[cut:] if heldout else names[:cut][:cfg.demos_per_task]
+    """A task's episodes a run trains on, or with ``heldout`` those set aside (never overlapping):
+    the first ``demos_per_task`` and the ``heldout_per_task`` after them, so both stay the same
+    as the demo set grows; without ``demos_per_task``, all but the last ``heldout_per_task``."""
+    h = cfg.heldout_per_task
+    n = len(names) - h if cfg.demos_per_task is None else min(cfg.demos_per_task, len(names) - h)
+    n = max(0, n)
+    return names[n:n + h] if heldout else names[:n]
 
 
 def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> DemoWindows:
