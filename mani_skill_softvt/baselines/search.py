@@ -5,8 +5,8 @@ demos with held-out demos set aside, ranked by their held-out open-loop error.
     python -m mani_skill_softvt.baselines.search --variant vo-c --table       # the results so far
 
 A recipe is a set of :class:`~mani_skill_softvt.baselines.config.DPConfig` overrides on the cpu
-preset (:data:`RECIPES`), always with ``heldout_per_task`` = ``--heldout`` (the last demos of each
-task, never trained on). Each run trains under ``--runs`` (outside the checkout: checkpoints and
+preset (:data:`RECIPES`), always with ``heldout_per_task`` = ``--heldout`` (demos of each task
+never trained on: those after ``--demos-per-task``, which stay the same as the set grows). Each run trains under ``--runs`` (outside the checkout: checkpoints and
 the prepared data are large), resuming where it stopped, until it ends or the time budget runs
 out; it keeps a snapshot policy every ``--snapshot-every`` steps. Every snapshot's open-loop
 error (:mod:`.openloop`) and training time become a line of ``baselines/search/<variant>.jsonl``
@@ -108,7 +108,9 @@ def main(argv=None) -> str:
     ap.add_argument("--variant", default="vo-c", choices=VARIANTS)
     ap.add_argument("--recipes", nargs="+", default=["base"], help=f"of {sorted(RECIPES)}, trained in this order")
     ap.add_argument("--budget-min", type=float, default=None, help="stop training after this many minutes (resumable)")
-    ap.add_argument("--heldout", type=int, default=HELDOUT, help="demos per task set aside (the last ones)")
+    ap.add_argument("--heldout", type=int, default=HELDOUT,
+                    help="demos per task set aside: the ones after --demos-per-task (else the last ones)")
+    ap.add_argument("--demos-per-task", type=int, default=None, help="demos per task trained on (default: all others)")
     ap.add_argument("--snapshot-every", type=int, default=SNAPSHOT_EVERY)
     ap.add_argument("--windows", type=int, default=500, help="replanning steps measured per set and snapshot")
     ap.add_argument("--threads", type=int, default=1, help="torch threads for training and measuring")
@@ -126,7 +128,7 @@ def main(argv=None) -> str:
         ap.error(f"unknown recipes {unknown}; the recipes are {sorted(RECIPES)}")
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
     for recipe in args.recipes:
-        cfg = recipe_config(args.variant, recipe, args.heldout, threads=args.threads)
+        cfg = recipe_config(args.variant, recipe, args.heldout, threads=args.threads, demos_per_task=args.demos_per_task)
         run = args.runs / args.variant / recipe
         policy = train(cfg, args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every)
         for line in measure_snapshots(args.variant, recipe, run, args.demos, args.results, args.windows, args.threads):

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Baselines campaign, step 2 (docs/baselines.md): the recipe search, resumable across sessions.
+#   bash scripts/campaign_recipes.sh [VARIANT=vo-c] [BUDGET_MIN=150] [RECIPE ...]
+# Trains the named recipes (mani_skill_softvt/baselines/search.py: RECIPES; default: all, in
+# order) on the step-1 demos (SOFTVT_DEMOS_DIR, default /root/softvt-demos, rendered at 84x84),
+# each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
+# spent; run again to continue. Runs (checkpoints, prepared data) stay beside the demos
+# (SOFTVT_RUNS_DIR, default /root/softvt-runs); every snapshot's open-loop error is logged to
+# baselines/search/<variant>.jsonl, which is committed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VARIANT=${1:-vo-c}; BUDGET=${2:-150}; shift $(( $# < 2 ? $# : 2 ))
+export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
+export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
+PY=${PY:-.venv/bin/python}
+recipes=("$@")
+if (( ${#recipes[@]} == 0 )); then
+  mapfile -t recipes < <("$PY" -c "from mani_skill_softvt.baselines.search import RECIPES; print(*RECIPES, sep='\n')")
+fi
+"$PY" -m mani_skill_softvt.baselines.search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
+  --demos "$SOFTVT_DEMOS_DIR" --runs "$SOFTVT_RUNS_DIR" --demos-per-task 90 --heldout 10
