@@ -1,0 +1,155 @@
+"""What an evaluation step of a learned policy costs, broken down, beside PickCube-v1 in the same run.
+
+    .venv/bin/python benchmarks/bench_eval_step.py [--camera 84] [--calls 10]
+
+The scripted expert's actions of one Object-Soft episode (task 3, the first ID seed) are
+recorded once, then replayed step by step in three obs modes, with the cameras at ``--camera``
+px: ``state_dict`` (physics: PhysX, the FEM and their coupling, plus the state), ``rgb`` (+ the two
+cameras) and ``rgb+tactile`` (+ both GelSights). The differences are the cameras' and the
+touch's share; the same actions give the same physics in every mode. ``rgb+tactile`` at 224 px
+shows what rendering at the policy's size cut. A Diffusion Policy step (``cpu`` preset, one
+thread) adds its inputs (resizing, ``features.frame_features``) every step and one denoised chunk
+every ``action_steps`` steps, timed on the replay's last observation with untrained weights (the
+cost does not depend on them).
+
+``x PickCube`` divides by a PickCube-v1 control step (physics and one camera at the same size,
+random actions) measured in this run, so machines compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def expert_actions(task: int, seed: int) -> list[np.ndarray]:
+    from mani_skill_softvt.evaluation.policies import ScriptedExpertPolicy
+    from mani_skill_softvt.evaluation.wrapper import make_env
+    from mani_skill_softvt.rollout import Observer, rollout
+
+    actions = []
+
+    class Keep(Observer):
+        def on_step(self, env, action, obs, info):
+            actions.append(np.asarray(action).copy())
+
+    env = make_env("object_soft", task, obs_mode="state_dict")
+    rollout(env, ScriptedExpertPolicy(), seed, observers=[Keep()])
+    env.close()
+    return actions
+
+
+def replay(task: int, seed: int, actions, obs_mode: str, camera: int) -> tuple[float, object]:
+    """Milliseconds per step of replaying ``actions`` in ``obs_mode``; the last observation."""
+    from mani_skill_softvt.evaluation.wrapper import make_env
+
+    env = make_env("object_soft", task, obs_mode=obs_mode, camera_size=(camera, camera))
+    obs, _ = env.reset(seed=seed)
+    t0 = time.perf_counter()
+    for a in actions:
+        obs = env.step(a)[0]
+    ms = 1e3 * (time.perf_counter() - t0) / len(actions)
+    env.close()
+    return ms, obs
+
+
+def pickcube_step(camera: int, steps: int = 40) -> float:
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401
+
+    env = gym.make("PickCube-v1", obs_mode="rgb", control_mode="pd_ee_delta_pose",
+                   sim_config={"sim_freq": 240, "control_freq": 20}, sensor_configs={"width": camera, "height": camera})
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = [rng.uniform(-0.2, 0.2, size=env.action_space.shape).astype(np.float32) for _ in range(steps + 1)]
+    env.step(actions[0])
+    t0 = time.perf_counter()
+    for a in actions[1:]:
+        env.step(a)
+    ms = 1e3 * (time.perf_counter() - t0) / steps
+    env.close()
+    return ms
+
+
+def policy_costs(variant: str, obs, calls: int) -> tuple[float, float, int]:
+    """(ms per step of the inputs, ms per denoised chunk, action_steps) of the cpu preset's policy."""
+    import torch
+
+    from mani_skill_softvt.baselines.config import make_config
+    from mani_skill_softvt.baselines.features import frame_features
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
+    from mani_skill_softvt.baselines.train import empty_stats
+    from mani_skill_softvt.observations import flatten_batch
+
+    torch.set_num_threads(1)
+    cfg = make_config(variant)
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        frame = frame_features(flatten_batch(obs), cfg)
+    inputs_ms = 1e3 * (time.perf_counter() - t0) / calls
+    model = DiffusionPolicyModel(cfg, empty_stats(cfg)).eval()
+    window = {k: torch.from_numpy(np.stack([v] * cfg.obs_horizon))[None] for k, v in frame.items()}
+    scheduler = noise_scheduler(cfg, inference=True)
+    generator = torch.Generator().manual_seed(0)
+    model.sample(window, generator, scheduler)  # first call outside the timing
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        model.sample(window, generator, scheduler)
+    return inputs_ms, 1e3 * (time.perf_counter() - t0) / calls, cfg.action_steps
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--camera", type=int, default=84, help="camera size (px, square) of the policy")
+    ap.add_argument("--calls", type=int, default=10, help="policy calls timed")
+    ap.add_argument("--task", type=int, default=3)
+    args = ap.parse_args(argv)
+    from tqdm import tqdm
+
+    from mani_skill_softvt.data.seeds import id_seed
+
+    seed = id_seed(args.task, 0)
+    with tqdm(total=7, desc="benchmark", unit="row") as bar:
+        actions = expert_actions(args.task, seed)
+        bar.update()
+        ms = {}
+        for mode, cam in (("state_dict", args.camera), ("rgb", args.camera), ("rgb+tactile", args.camera),
+                          ("rgb+tactile", 224)):
+            ms[(mode, cam)], obs = replay(args.task, seed, actions, mode, cam)
+            if (mode, cam) == ("rgb+tactile", args.camera):
+                last = obs
+            bar.update()
+        vo = policy_costs("vo-c", last, args.calls)
+        vt = policy_costs("vt-c", last, args.calls)
+        bar.update()
+        pick = pickcube_step(args.camera)
+        bar.update()
+    physics = ms[("state_dict", args.camera)]
+    cameras = ms[("rgb", args.camera)] - physics
+    tactile = ms[("rgb+tactile", args.camera)] - ms[("rgb", args.camera)]
+    rows = [("physics (PhysX + FEM + coupling), state", physics),
+            (f"two cameras at {args.camera} px", cameras),
+            ("two GelSights (tactile images, depth, markers)", tactile)]
+    for name, (inputs, chunk, k) in (("vo-c", vo), ("vt-c", vt)):
+        rows.append((f"{name} inputs (every step)", inputs))
+        rows.append((f"{name} denoising, {chunk:.0f} ms per chunk / {k} steps", chunk / k))
+    total_vt = physics + cameras + tactile + vt[0] + vt[1] / vt[2]
+    print(f"\nObject-Soft task {args.task}, {len(actions)} expert steps replayed; PickCube-v1 step "
+          f"(one {args.camera}-px camera): {pick:.1f} ms\n")
+    print(f"{'component':<52}{'ms/step':>9}{'share of vt-c':>15}{'x PickCube':>12}")
+    for name, v in rows:
+        share = "" if name.startswith("vo-c") else f"{v / total_vt:>14.0%}"
+        print(f"{name:<52}{v:>9.1f}{share:>15}{v / pick:>12.2f}")
+    print(f"{'vt-c evaluation step, all of it':<52}{total_vt:>9.1f}{'100%':>15}{total_vt / pick:>12.2f}")
+    full = ms[("rgb+tactile", 224)]
+    print(f"\nrgb+tactile step with 224-px cameras: {full:.1f} ms, at {args.camera} px: "
+          f"{ms[('rgb+tactile', args.camera)]:.1f} ms (cut {1 - ms[('rgb+tactile', args.camera)] / full:.0%})")
+    print(f"a 300-step vt-c episode: {300 * total_vt / 1e3:.0f} s; the Object-Soft ID protocol (500 episodes, "
+          f"at most): {500 * 300 * total_vt / 3.6e6:.1f} h per core")
+    return {"ms": {f"{m}@{c}": v for (m, c), v in ms.items()}, "pickcube_ms": pick, "vo": vo, "vt": vt}
+
+
+if __name__ == "__main__":
+    main()
