@@ -76,8 +76,9 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
 def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out: Path, planner: str,
                    control_mode: str, queue) -> dict:
     """Record one task's demos: the first ``num`` training seeds, or with ``accepted`` training seeds
-    in order until that many are accepted (at most ``num`` seeds). The progress queue gets one per
-    seed, or with ``accepted`` one per accepted demo."""
+    in order until that many are accepted (at most ``num`` seeds), keeping every seed generated
+    before (a smaller ``accepted`` never shrinks the set, nor its renderings). The progress queue
+    gets one per seed, or with ``accepted`` one per accepted demo (at most ``accepted``)."""
     from .data.seeds import train_seed
     from .data.trajectory import episode_json_line
     from .evaluation.wrapper import make_env
@@ -87,9 +88,9 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     seeds, kept = [], 0
     env = None
     for i in range(num):
-        if accepted is not None and kept >= accepted:
-            break
         seed = train_seed(task_id, i)
+        if accepted is not None and kept >= accepted and seed not in qc:
+            break
         seeds.append(seed)
         if not (seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists())):
             # New, or accepted but its file is not here: the QC logs are committed, the demos are
@@ -104,7 +105,7 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
             append_jsonl(demo_set.qc_log(task_id), line)
             qc[seed] = line
         kept += bool(qc[seed]["accepted"])
-        if accepted is None or qc[seed]["accepted"]:
+        if accepted is None or (qc[seed]["accepted"] and kept <= accepted):
             queue.put(1)
     if env is not None:
         env.close()
@@ -142,7 +143,8 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     """Record expert demos per task, one work item per task (local processes or Ray tasks): the
     first ``num`` training seeds, or with ``accepted`` training seeds in order until that many
     demos are accepted, drawing at most ``num`` seeds (a task whose expert fails on some seeds
-    still ends with ``accepted`` demos: the paper's 100 per task).
+    still ends with ``accepted`` demos: the paper's 100 per task); seeds generated before are
+    kept, so the set never shrinks.
 
     ``planner`` ("mplib" or "cartesian", default :data:`~mani_skill_softvt.expert.pick_place.DEFAULT_PLANNER`)
     joins the expert's waypoints; each episode records the planner that produced it.

@@ -100,6 +100,15 @@ def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_
     assert manifest["train_seeds"]["3"] == [first, first + 1]
     with h5py.File(demo_set.trajectory(3), "r") as f:
         assert list(f.keys()) == ["traj_0"] and f["traj_0"].attrs["seed"] == first + 1
+    # Seeds generated before are kept: asking for fewer never shrinks the set (nor its renderings).
+    append_jsonl(demo_set.qc_log(3), {**demo_set.verdicts(3)[1], "seed": first + 2})  # as if generated
+    import shutil
+
+    shutil.copy(demo_set.episode_file(3, first + 1), demo_set.episode_file(3, first + 2))
+    shutil.copy(demo_set.episode_file(3, first + 1).with_suffix(".json"),
+                demo_set.episode_file(3, first + 2).with_suffix(".json"))
+    (row,) = generate("object_rigid", [3], 3, tmp_path, accepted=1)["tasks"]
+    assert (row["generated"], row["accepted"]) == (3, 2) and len(demo_set.verdicts(3)) == 3
     with pytest.raises(SystemExit):
         main(["generate", "--suite", "object_rigid", "--tasks", "3", "--num", "2", "--accepted", "3", "--out",
               str(tmp_path)])
