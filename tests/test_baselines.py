@@ -46,6 +46,7 @@ def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSI
             g = ft.create_group(f"traj_{e}")
             g["actions"], g["actions_binary"] = a, np.where(np.arange(7) == 6, (a > 0.4), a).astype(np.float32)
             o = fr.create_group(f"traj_{e}/obs")
+            fr[f"traj_{e}"].attrs["states_sha256"] = f"episode {e} of seed {seed}"  # as demos render keeps it
             if tactile_model is not None:
                 fr[f"traj_{e}"].attrs["tactile_model"] = tactile_model
             pose = np.tile(np.r_[0.0, 0.0, 0.2, down_quat(0.1)], (t + 1, 1)).astype(np.float32)
@@ -317,6 +318,8 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
     fixed = make_config("vo-c", demos_per_task=30, heldout_per_task=5)
     assert split_episodes(names, fixed) == names[:30] and split_episodes(names, fixed, heldout=True) == names[30:35]
     assert split_episodes(names + ["traj_40"], fixed, heldout=True) == names[30:35]  # the set grew: the same split
+    with pytest.raises(ValueError, match="task0.h5: 34 demos.*trains on 30 and holds out 5"):
+        split_episodes(names[:34], fixed, where="task0.h5")
     path = T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False)
     result = openloop_main([str(path), "--demos", str(tmp_path / "demos"), "--threads", "1"])
     assert result["heldout"]["windows"] == 1 and result["training"]["windows"] == 3
@@ -324,6 +327,16 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
     untouched = T.train(make_config("vo-c", **TINY), tmp_path / "demos", tmp_path / "all", progress=False)
     with pytest.raises(SystemExit):
         openloop_main([str(untouched), "--demos", str(tmp_path / "demos")])
+    # The prepared data's key names the episodes read: the set grew, the key stays (a run resumes).
+    from mani_skill_softvt.baselines.dataset import _sources, cache_key
+
+    small = make_config("vo-c", **{**TINY, "demos_per_task": 1, "heldout_per_task": 1})
+    before = cache_key(small, _sources(small, tmp_path / "demos"))
+    _write_demos(tmp_path / "demos", lengths=(9, 6, 7, 5))
+    assert cache_key(small, _sources(small, tmp_path / "demos")) == before
+    assert cache_key(small, _sources(small, tmp_path / "demos"), heldout=True) != before
+    with pytest.raises(SystemExit):  # the demos the run trained on changed: its held-out ones may not be
+        openloop_main([str(path), "--demos", str(tmp_path / "demos"), "--threads", "1"])
 
 
 def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(tmp_path, monkeypatch, capsys):

@@ -76,6 +76,17 @@ def required_modes(path: Path) -> tuple[str, str]:
     return ("rgb+tactile" if cfg.tactile else "rgb"), ("pd_ee_pose_binary" if cfg.binary_gripper else "pd_ee_pose")
 
 
+def executed_actions(chunk: np.ndarray, cfg: DPConfig) -> np.ndarray:
+    """The actions the agent sends of a denoised (..., action_horizon, 7) chunk: the first
+    ``action_steps``, the gripper closure clipped to [0, 1] (thresholded at 0.5 for -b variants)."""
+    out = np.asarray(chunk)[..., :cfg.action_steps, :].astype(np.float32)
+    if cfg.binary_gripper:
+        out[..., GRIPPER] = (out[..., GRIPPER] > 0.5).astype(np.float32)
+    else:
+        out[..., GRIPPER] = np.clip(out[..., GRIPPER], 0.0, 1.0)
+    return out
+
+
 class DiffusionPolicyAgent(Policy):
     """Closed-loop Diffusion Policy (see the module docstring)."""
 
@@ -114,9 +125,4 @@ class DiffusionPolicyAgent(Policy):
             chunk = self.model.sample(window, self.generator, self.scheduler)[0].numpy()
         finally:
             torch.set_num_threads(threads)
-        chunk = chunk[:self.cfg.action_steps].astype(np.float32)
-        if self.cfg.binary_gripper:
-            chunk[:, GRIPPER] = (chunk[:, GRIPPER] > 0.5).astype(np.float32)
-        else:
-            chunk[:, GRIPPER] = np.clip(chunk[:, GRIPPER], 0.0, 1.0)
-        return chunk
+        return executed_actions(chunk, self.cfg)

@@ -109,23 +109,39 @@ def _sources(cfg: DPConfig, demos_root: Path) -> list[tuple[int, Path, Path]]:
     return [(task, p.trajectory_h5, p.rendered_h5) for task, p in zip(cfg.tasks, pairs)]
 
 
-def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]]) -> str:
-    files = [(str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns) for _, a, b in sources for p in (a, b)]
+def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]], heldout: bool = False) -> str:
+    """What the prepared arrays depend on: the config's input fields and, per task, the episodes
+    read. An episode is named by its source's digest (kept in the rendering), so a demo set that
+    grew, or files written again with the same episodes, keep the key: a training run resumes
+    while step 1 of the campaign goes on. Renderings without digests are named by file."""
     fields = {k: getattr(cfg, k) for k in INPUT_FIELDS}
-    return hashlib.sha256(json.dumps([files, fields], default=list).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps([[_episodes_read(cfg, a, b, heldout) for _, a, b in sources], fields, heldout],
+                                     default=list).encode()).hexdigest()[:16]
+
+
+def _episodes_read(cfg: DPConfig, trajectory: Path, rendered: Path, heldout: bool) -> list:
+    with open_h5(rendered) as f:
+        names = split_episodes(_episode_names(f), cfg, heldout, where=rendered)
+        digests = [f[n].attrs.get("states_sha256") for n in names]
+    if all(isinstance(d, str) for d in digests):
+        return [rendered.name, digests]
+    return [(str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns) for p in (trajectory, rendered)]
 
 
 def _episode_names(f) -> list[str]:
     return sorted((k for k in f.keys() if k.startswith("traj_")), key=lambda k: int(k.split("_")[1]))
 
 
-def split_episodes(names: list[str], cfg: DPConfig, heldout: bool = False) -> list[str]:
+def split_episodes(names: list[str], cfg: DPConfig, heldout: bool = False, where: Path | str = "") -> list[str]:
     """A task's episodes a run trains on, or with ``heldout`` those set aside (never overlapping):
     the first ``demos_per_task`` and the ``heldout_per_task`` after them, so both stay the same
-    as the demo set grows; without ``demos_per_task``, all but the last ``heldout_per_task``."""
-    h = cfg.heldout_per_task
-    n = len(names) - h if cfg.demos_per_task is None else min(cfg.demos_per_task, len(names) - h)
-    n = max(0, n)
+    as the demo set grows; without ``demos_per_task``, all but the last ``heldout_per_task``.
+    A task with too few demos for the split (``where``: its file) is an error, not a smaller split."""
+    h, n = cfg.heldout_per_task, cfg.demos_per_task
+    if h and len(names) < (n or 1) + h:
+        raise ValueError(f"{where}: {len(names)} demos, and the run trains on {n or 'at least 1'} and holds out {h} "
+                         "after them; generate more demos (demos generate --accepted) or lower demos_per_task")
+    n = len(names) - h if n is None else n
     return names[n:n + h] if heldout else names[:n]
 
 
@@ -140,7 +156,7 @@ def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> DemoWindo
     with tqdm(total=len(sources), desc="prepare demos", unit="task") as bar:
         for task, traj, rendered in sources:
             with open_h5(traj) as ft, open_h5(rendered) as fr:
-                names = split_episodes(_episode_names(ft), cfg, heldout)
+                names = split_episodes(_episode_names(ft), cfg, heldout, where=traj)
                 for name in names:
                     if name not in fr or "obs" not in fr[name]:
                         raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
@@ -188,7 +204,7 @@ def _needed_keys(cfg: DPConfig) -> list[str]:
 
 def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: bool = False) -> DemoWindows:
     """:func:`prepare`, through the cache file ``cache`` when given (rebuilt if its key differs)."""
-    key = cache_key(cfg, _sources(cfg, demos_root)) + ("-heldout" if heldout else "")
+    key = cache_key(cfg, _sources(cfg, demos_root), heldout)
     if cache is not None and cache.exists():
         with np.load(cache, allow_pickle=False) as z:
             if str(z["key"]) == key and "camera_render_size" in z.files:

@@ -23,10 +23,8 @@ from tqdm import tqdm
 
 from ..fileio import atomic_write_json
 from ..paths import DEMOS_DIR
+from .agent import GRIPPER, executed_actions
 from .dataset import DemoWindows, load_windows
-
-GRIPPER = 6
-
 
 def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
     """Per action of (..., 7) base-frame actions (xyz, axis-angle, closure): the position error (m),
@@ -52,8 +50,9 @@ def replan_indices(windows: DemoWindows, every: int, limit: int | None = None) -
 
 def chunk_errors(model, windows: DemoWindows, indices: np.ndarray, seed: int = 0, batch: int = 64,
                  progress: bool = True) -> dict[str, np.ndarray]:
-    """:func:`action_errors` of the executed part (``action_steps``) of the chunks the model
-    denoises at ``indices`` against the demonstrated actions; arrays (len(indices), action_steps)."""
+    """:func:`action_errors` of the actions the agent would execute (the first ``action_steps`` of
+    each chunk the model denoises at ``indices``, its gripper column as the agent sends it) against
+    the demonstrated ones; arrays (len(indices), action_steps)."""
     from .model import noise_scheduler
 
     cfg = model.cfg
@@ -62,8 +61,8 @@ def chunk_errors(model, windows: DemoWindows, indices: np.ndarray, seed: int = 0
     parts = []
     for i in tqdm(range(0, len(indices), batch), desc="open loop", unit="batch", disable=not progress, leave=False):
         obs, act = windows.batch(indices[i:i + batch])
-        chunk = model.sample(obs, generator, scheduler).numpy()
-        parts.append(action_errors(chunk[:, :cfg.action_steps], act[:, :cfg.action_steps].numpy()))
+        chunk = executed_actions(model.sample(obs, generator, scheduler).numpy(), cfg)
+        parts.append(action_errors(chunk, act[:, :cfg.action_steps].numpy()))
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -100,6 +99,10 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
     run = run_dir_of(policy_path)
     heldout = load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True)
     training = load_windows(cfg, demos_root, run / CACHE)
+    if ckpt.get("data_key") not in (None, training.key):
+        raise ValueError(f"{policy_path} was trained on other demos than {demos_root} now holds (its episodes "
+                         "changed): the held-out ones might have been trained on. Measure it on the demos it was "
+                         "trained on, or train again")
     out = {"policy": str(policy_path), "steps": ckpt.get("steps"), "episodes_trained": training.episodes,
            "episodes_heldout": heldout.episodes, "camera_render_size": list(heldout.camera_render_size)}
     for name, windows in (("heldout", heldout), ("training", training)):

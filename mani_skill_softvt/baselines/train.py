@@ -150,7 +150,8 @@ class Training:
         return {"config": self.cfg.to_dict(), "model": self.policy_state(), "steps": self.step,
                 "tactile_model": TACTILE_MODEL_VERSION if self.cfg.tactile else None,
                 "episodes": windows.episodes, "samples": len(windows),
-                "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s}
+                "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s,
+                "data_key": windows.key}
 
 
 def save(path: Path, obj: dict) -> None:
