@@ -346,17 +346,22 @@ def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(t
     monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
     argv = ["--recipes", "tiny", "--heldout", "1", "--snapshot-every", "2", "--demos", str(tmp_path / "demos"),
             "--runs", str(tmp_path / "runs"), "--results", str(tmp_path / "results")]
-    search.main(argv + ["--budget-min", "0"])  # the budget is spent at the first checkpoint
+    search.main(argv + ["--budget-min", "0.0001"])  # the budget is spent at the first checkpoint
     assert "ran out" in capsys.readouterr().out
     assert [r["step"] for r in search.measured("vo-c", tmp_path / "results").values()] == [2]
     search.main(argv)  # resumes, measures the later snapshots only
-    rows = search.measured("vo-c", tmp_path / "results")
-    assert sorted(rows) == [("tiny", 2), ("tiny", 4), ("tiny", 6)]
-    assert all(r["episodes_heldout"] == 1 and r["episodes_trained"] == 2 for r in rows.values())
-    assert rows[("tiny", 6)]["train_wall_s"] >= rows[("tiny", 2)]["train_wall_s"]
+    rows = {r["step"]: r for r in search.measured("vo-c", tmp_path / "results").values()}
+    assert sorted(rows) == [2, 4, 6] and len({r["run"] for r in rows.values()}) == 1
+    assert all(r["episodes_heldout"] == 1 and r["episodes_trained"] == 2 and r["recipe"] == "tiny" for r in rows.values())
+    assert rows[6]["train_wall_s"] >= rows[2]["train_wall_s"]
+    assert (tmp_path / "runs" / "vo-c" / "vo-c-tiny" / "snapshots" / "vo-c-tiny_step000004.pt").exists()
     search.main(argv)  # nothing new
     assert len((tmp_path / "results" / "vo-c.jsonl").read_text().splitlines()) == 3
-    assert "| tiny | 6 |" in search.main(["--results", str(tmp_path / "results"), "--table"])
+    assert f"| tiny ({rows[6]['run'][:6]}) | 6 |" in search.main(["--results", str(tmp_path / "results"), "--table"])
+    # Another held-out split (or an edited recipe) is another run: its results never hide behind these.
+    cfg = search.recipe_config("vo-c", "tiny", 1)
+    assert search.run_id(cfg, "k") != search.run_id(search.recipe_config("vo-c", "tiny", 2), "k")
+    assert search.run_id(cfg, "k") != search.run_id(cfg, "other demos")
 
 
 # ------------------------------------------------------------------------------------- agent

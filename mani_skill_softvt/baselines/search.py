@@ -57,8 +57,22 @@ def results_path(variant: str, results_dir: Path = RESULTS_DIR) -> Path:
 
 
 def measured(variant: str, results_dir: Path = RESULTS_DIR) -> dict[tuple[str, int], dict]:
-    """The open-loop results logged so far, by (recipe, step)."""
-    return {(r["recipe"], r["step"]): r for r in read_jsonl(results_path(variant, results_dir))}
+    """The open-loop results logged so far, by (run, step): a run is a recipe's config on its demos."""
+    return {(r["run"], r["step"]): r for r in read_jsonl(results_path(variant, results_dir))}
+
+
+def run_id(cfg, data_key: str) -> str:
+    """A run's identity in the results: its config and the episodes it trained on (another
+    --demos-per-task, --heldout or an edited recipe is another run)."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps([cfg.to_dict(), data_key], default=list).encode()).hexdigest()[:12]
+
+
+def snapshot_step(path: Path) -> int:
+    """The step of a snapshot from its name (``<run>_step001500.pt``)."""
+    return int(Path(path).stem.rsplit("_step", 1)[1])
 
 
 def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, results_dir: Path, windows: int,
@@ -68,17 +82,19 @@ def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, re
 
     from .openloop import openloop
 
+    from .config import DPConfig
+
     done = measured(variant, results_dir)
     new = []
-    for snap in sorted((run / "snapshots").glob("*.pt")):
+    for snap in sorted((run / "snapshots").glob("*.pt"), key=snapshot_step):
         ckpt = torch.load(snap, map_location="cpu", weights_only=False)
-        step = int(ckpt["steps"])
-        if (recipe, step) in done:
+        cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
+        identity = run_id(cfg, ckpt.get("data_key", ""))
+        if (identity, snapshot_step(snap)) in done:
             continue
         result = openloop(snap, demos_root, windows, threads, progress=False, write=False)
-        line = {"recipe": recipe, "overrides": {k: list(v) if isinstance(v, tuple) else v
-                                                for k, v in RECIPES[recipe].items()},
-                "step": step, "train_wall_s": round(float(ckpt.get("train_wall_s", 0.0)), 1),
+        line = {"run": identity, "recipe": recipe, "config": ckpt["config"],
+                "step": snapshot_step(snap), "train_wall_s": round(float(ckpt.get("train_wall_s", 0.0)), 1),
                 "episodes_trained": result["episodes_trained"], "episodes_heldout": result["episodes_heldout"],
                 "heldout": result["heldout"], "training": result["training"], "policy": snap.name}
         append_jsonl(results_path(variant, results_dir), line)
@@ -88,13 +104,13 @@ def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, re
 
 def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
     """The logged results, one row per (recipe, step), by recipe then step."""
-    rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["step"]))
-    head = ("| recipe | step | training min | held-out pos mm | 1st action mm | rot deg | gripper | training pos mm |\n"
+    rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["run"], r["step"]))
+    head = ("| recipe (run) | step | training min | held-out pos mm | 1st action mm | rot deg | gripper | training pos mm |\n"
             "|---|---|---|---|---|---|---|---|")
     lines = [f"{variant}: open-loop error on {rows[0]['episodes_heldout'] if rows else 0} held-out demos", "", head]
     for r in rows:
         h, t = r["heldout"], r["training"]
-        lines.append(f"| {r['recipe']} | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
+        lines.append(f"| {r['recipe']} ({r['run'][:6]}) | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
                      f"{h['position_mm_first_action']:.1f} | {h['rotation_deg_mean']:.2f} | {h['gripper_mean']:.3f} | "
                      f"{t['position_mm_mean']:.1f} |")
     return "\n".join(lines)
@@ -128,8 +144,11 @@ def main(argv=None) -> str:
         ap.error(f"unknown recipes {unknown}; the recipes are {sorted(RECIPES)}")
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
     for recipe in args.recipes:
+        if deadline is not None and time.monotonic() >= deadline:
+            print(f"the time budget ran out before {recipe}; run the same command again to continue")
+            break
         cfg = recipe_config(args.variant, recipe, args.heldout, threads=args.threads, demos_per_task=args.demos_per_task)
-        run = args.runs / args.variant / recipe
+        run = args.runs / args.variant / f"{args.variant}-{recipe}"  # its records and snapshots say both
         policy = train(cfg, args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every)
         for line in measure_snapshots(args.variant, recipe, run, args.demos, args.results, args.windows, args.threads):
             print(f"{recipe} step {line['step']}: held-out {line['heldout']['position_mm_mean']:.1f} mm, "
