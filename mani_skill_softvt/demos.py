@@ -28,7 +28,7 @@ import numpy as np
 
 from .data.demo_set import DemoSet
 from .fileio import append_jsonl, atomic_write_json, read_json
-from .observations import camera_sensor_configs, tactile_keys
+from .observations import camera_sensor_configs, parse_image_size, tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
@@ -365,17 +365,6 @@ def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[s
 CURRENT_RENDER_KEYS = {"rgb+tactile": tuple(tactile_keys(("depth",)))}
 
 
-def _image_size(text: str, flag: str = "--image-size") -> tuple[int, int] | None:
-    """``HxW`` -> (H, W); ``native`` -> None (each stream keeps its size)."""
-    if text == "native":
-        return None
-    try:
-        h, w = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"{flag} {text!r}: give HxW (e.g. 84x84) or 'native'") from None
-    return h, w
-
-
 _OUT_HELP = (f"demos directory, generate + render output (default {DEMOS_DIR}: $SOFTVT_DEMOS_DIR, else the "
              "checkout's demos/; needed to generate or render when the package is installed)")
 
@@ -455,7 +444,7 @@ def main(argv=None):
         if args.workers < 1:
             ap.error("--workers must be >= 1")
         try:
-            camera_size = _image_size(args.camera_size, "--camera-size")
+            camera_size = parse_image_size(args.camera_size, "--camera-size")
             camera_sensor_configs(camera_size)
         except ValueError as err:
             ap.error(str(err))
@@ -495,9 +484,9 @@ def main(argv=None):
         demo_set = DemoSet(args.out, args.suite)
         tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
         try:
-            sources = demo_set.rendered_sources(tasks, args.obs_mode, _image_size(args.camera_size, "--camera-size"))
+            sources = demo_set.rendered_sources(tasks, args.obs_mode, parse_image_size(args.camera_size, "--camera-size"))
             info = export_lerobot(sources, args.lerobot_out,
-                                  use_videos=not args.no_video, image_size=_image_size(args.image_size))
+                                  use_videos=not args.no_video, image_size=parse_image_size(args.image_size))
         except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
             ap.error(str(err))
         print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "

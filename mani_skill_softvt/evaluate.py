@@ -37,6 +37,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
                     help="default: state_dict, or what a trained baseline (policy.pt) was trained on")
+    ap.add_argument("--camera-size", default=None, metavar="HxW",
+                    help="render the cameras at HxW (default: the size the policy asks for, a trained baseline's "
+                         "own, else 224x224); a policy server trained on smaller images needs it")
     ap.add_argument("--control-mode", default=None, choices=["pd_ee_pose", "pd_ee_pose_binary"],
                     help="default: pd_ee_pose, or pd_ee_pose_binary for a binary-gripper baseline (vo-b, vt-b)")
     ap.add_argument("--workers", type=int, default=1)
@@ -54,6 +57,12 @@ def main(argv=None) -> dict:
     if args.rescore is not None:
         return _rescore(args.rescore, args.percentile, args.out)
     _resolve_modes(ap, args)
+    from .observations import parse_image_size
+
+    try:
+        args.camera_size = None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size")
+    except ValueError as e:
+        ap.error(str(e))
     tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
     if any(not 0 <= t < NUM_TASKS for t in tasks):
         ap.error(f"task ids must be in [0, {NUM_TASKS - 1}]")
@@ -82,8 +91,11 @@ def main(argv=None) -> dict:
     policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", tag_source).strip("_")
     stem = f"{args.suite}_{args.protocol}_{policy_tag}"
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
-    records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
-                       progress=bar.update, ray_address=args.ray)
+    try:
+        records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
+                           progress=bar.update, ray_address=args.ray, camera_size=args.camera_size)
+    except ValueError as e:
+        ap.error(str(e))
     bar.close()
     failed = [r for r in records if r["termination"] in ("policy_error", "worker_died")]
     if failed:
@@ -96,14 +108,17 @@ def main(argv=None) -> dict:
         from .evaluation.runner import run_records
 
         id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
-        id_records = list(run_records(id_file, args.policy, args.obs_mode, args.control_mode).values())
+        from .evaluation.policies import policy_camera_size
+
+        size = args.camera_size or policy_camera_size(args.policy)
+        id_records = list(run_records(id_file, args.policy, args.obs_mode, args.control_mode, size).values())
         plot_ood_curves(records, id_records, args.out / f"{stem}_ood.png")
     print(md.read_text())
     if records and records[0]["receipt"]["privileged"]:
         print("(policy is privileged: it reads the simulator state)")
     print(f"records: {args.out / f'{stem}.jsonl'}  report: {md}")
     if args.video:
-        _videos(records[:args.video], args.policy, args.control_mode, args.out / "videos", stem)
+        _videos(records[:args.video], args.policy, args.control_mode, args.out / "videos", stem, args.camera_size)
     return {"records": records}
 
 
@@ -148,14 +163,14 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
     return {"records": new}
 
 
-def _videos(records: list[dict], policy: str, control_mode: str, out: Path, stem: str) -> None:
+def _videos(records: list[dict], policy: str, control_mode: str, out: Path, stem: str, camera_size=None) -> None:
     """Videos of ``records`` (re-run in rgb+tactile mode); existing files are kept, so a re-run resumes."""
     from .evaluation.videos import record_episode_video, video_name
 
     for r in records:
         path = out / video_name(stem, r)
         if not path.exists():
-            record_episode_video(r, policy, path, control_mode=control_mode)
+            record_episode_video(r, policy, path, control_mode=control_mode, camera_size=camera_size)
         print(f"video: {path}")
 
 

@@ -52,6 +52,17 @@ def camera_sensor_configs(camera_size: tuple[int, int] | None) -> dict:
     return {"width": w, "height": h}
 
 
+def parse_image_size(text: str, flag: str = "--image-size") -> tuple[int, int] | None:
+    """``HxW`` on a command line -> (H, W); ``native`` -> None (each stream keeps its size)."""
+    if text == "native":
+        return None
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"{flag} {text!r}: give HxW (e.g. 84x84) or 'native'") from None
+    return h, w
+
+
 def camera_size_name(camera_size: tuple[int, int] | None) -> str:
     """``84x84``: how a camera size appears in file names and on the command line."""
     h, w = camera_size or NATIVE_CAMERA_SIZE

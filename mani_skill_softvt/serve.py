@@ -78,6 +78,12 @@ def make_policy_factory(spec: str):
     return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
 
 
+def camera_size_of(spec: str) -> list[int] | None:
+    """The camera size the served policy asks for (told to clients in the metadata), if any."""
+    size = getattr(load_policy(spec), "camera_size", None)
+    return None if size is None else [int(v) for v in size]
+
+
 def _chunk(policy, obs: dict) -> np.ndarray:
     """The policy's action chunk as the (k, 7) float32 array sent back; ValueError for another shape."""
     actions = np.asarray(policy.act(obs), dtype=np.float32)
@@ -87,7 +93,8 @@ def _chunk(policy, obs: dict) -> np.ndarray:
     return actions
 
 
-def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int = DEFAULT_PORT):
+def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 camera_size: list[int] | None = None):
     """A websockets sync server (not yet serving: call ``serve_forever``; ``shutdown`` stops it)."""
     import websockets.sync.server
     from openpi_client import msgpack_numpy
@@ -96,6 +103,8 @@ def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int =
     metadata = {"policy": name, "server": "mani_skill_softvt.serve", "package_version": __version__,
                 "action_space": "pd_ee_pose: (k, 7) TCP xyz in the robot base frame, axis-angle, gripper closure",
                 "episode_keys": [EPISODE_RESET, EPISODE_SEED]}
+    if camera_size is not None:  # the evaluator must render its cameras at this size (evaluate --camera-size)
+        metadata["camera_size"] = list(camera_size)
 
     def handler(conn) -> None:
         policy = policy_factory()
@@ -135,7 +144,7 @@ def main(argv=None) -> None:
     except ValueError as e:
         ap.error(str(e))
     try:
-        server = build_server(factory, name, args.host, args.port)
+        server = build_server(factory, name, args.host, args.port, camera_size_of(args.policy))
     except OSError as e:  # port taken, address not local
         ap.error(f"cannot listen on {args.host}:{args.port}: {e}; choose another --port (0: any free one)")
     with server:

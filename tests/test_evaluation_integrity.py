@@ -206,3 +206,13 @@ def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_pat
     (rec,) = evaluate(eps, "misbehaving_policies:SmallCameras", tmp_path / "small.jsonl", obs_mode="rgb")
     assert rec["termination"] == "policy_error" and "NaN" in rec["error"], rec["error"]  # not "cameras seen at"
     assert rec["camera_size"] == [24, 32] and rec["steps"] == 0
+    # Another camera size is another run; asking the policy for one it was not trained on is refused.
+    from mani_skill_softvt.evaluation.runner import record_field, run_records
+
+    assert run_records(tmp_path / "small.jsonl", "misbehaving_policies:SmallCameras", "rgb", "pd_ee_pose", (24, 32))
+    assert not run_records(tmp_path / "small.jsonl", "misbehaving_policies:SmallCameras", "rgb", "pd_ee_pose")
+    with pytest.raises(ValueError, match="trained on 24x32 cameras; evaluate it at that size"):
+        evaluate(eps, "misbehaving_policies:SmallCameras", tmp_path / "other.jsonl", obs_mode="rgb", camera_size=(84, 84))
+    # Records from before the size was kept had the native cameras; state modes have none.
+    assert record_field({"obs_mode": "rgb"}, "camera_size") == [224, 224]
+    assert record_field({"obs_mode": "state_dict"}, "camera_size") is None

@@ -283,3 +283,19 @@ def test_env_episode_scored_the_same_in_process_and_served():
     assert strip(served) == strip(local)
     assert refused["termination"] == "policy_error" and f"cannot connect to the policy server at {url}" in refused["error"]
     assert refused["steps"] == 0 and not refused["success"] and refused["policy"] == url
+
+
+def test_a_server_whose_policy_takes_smaller_cameras_says_so_and_a_mismatch_is_an_error():
+    factory, name = make_policy_factory("random")
+    with _serving(build_server(factory, name, "127.0.0.1", 0, camera_size=[84, 84])) as url:
+        remote = WebsocketPolicy(url, reply_timeout=10)
+        remote.reset("pick", 1)
+        assert remote.metadata["camera_size"] == [84, 84]
+        with pytest.raises(RemotePolicyError, match="takes 84x84 cameras and this evaluation renders 224x224: "
+                                                    "evaluate with --camera-size 84x84"):
+            remote.act(_obs(False))
+        small = _obs(False)
+        for cam in small["sensor_data"].values():
+            cam["rgb"] = cam["rgb"][:, :84, :84]
+        assert remote.act(small).shape[1] == 7
+        remote.close()

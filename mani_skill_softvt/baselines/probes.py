@@ -265,7 +265,7 @@ def plot_result(result: dict, path: Path) -> None:
 
 
 def main(argv=None) -> dict:
-    from ..demos import _image_size
+    from ..observations import parse_image_size
     from ..tasks.suites import NUM_TASKS
 
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.probes", description=__doc__,
@@ -280,7 +280,7 @@ def main(argv=None) -> dict:
     if not 0 < args.heldout_fraction < 1:
         ap.error(f"--heldout-fraction {args.heldout_fraction}: give a fraction in (0, 1)")
     try:
-        result = run(args.demos, args.suite, args.tasks, _image_size(args.camera_size, "--camera-size"),
+        result = run(args.demos, args.suite, args.tasks, parse_image_size(args.camera_size, "--camera-size"),
                      args.heldout_fraction)
     except (FileNotFoundError, ValueError) as e:
         ap.error(str(e))

@@ -9,6 +9,7 @@ holds the env.
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 
 import numpy as np
 
@@ -63,6 +64,25 @@ class RandomPolicy(Policy):
 
 BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPolicy, "hold": HoldPolicy,
            "random": RandomPolicy}
+
+
+def policy_camera_size(spec: str) -> tuple[int, int] | None:
+    """The camera size (height, width) the policy ``spec`` asks for (:attr:`Policy.camera_size`),
+    read without building it: a baseline's ``policy.pt`` says it, a ``module:Class`` as a class
+    attribute; built-in policies and policy servers (whose size the evaluator is told,
+    ``evaluate --camera-size``) take the env's."""
+    if spec.endswith(".pt"):
+        from ..baselines.agent import camera_render_size, read_policy_file
+
+        return camera_render_size(read_policy_file(Path(spec))[1])
+    if spec in BUILTIN or spec.startswith(("ws://", "wss://")) or ":" not in spec:
+        return None
+    module, cls = spec.split(":", 1)
+    try:
+        size = getattr(getattr(importlib.import_module(module), cls), "camera_size", None)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"cannot load policy '{spec}': {e}") from e
+    return None if size is None else tuple(int(v) for v in size)
 
 
 def load_policy(spec: str) -> Policy:

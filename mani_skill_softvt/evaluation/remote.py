@@ -178,6 +178,16 @@ class WebsocketPolicy(Policy):
         served = self.metadata.get("policy") if isinstance(self.metadata, dict) else None
         self.name = f"remote[{served or '?'}]@{self.url}"
 
+    def _check_camera_size(self, request: dict) -> None:
+        """A server that says its policy takes another camera size than the evaluator renders is an
+        error naming the flag, not a policy silently fed resized images."""
+        wanted = self.metadata.get("camera_size") if isinstance(self.metadata, dict) else None
+        got = [list(request[key].shape[:2]) for key in CAMERAS]
+        if wanted is not None and any(g != list(wanted) for g in got):
+            raise RemotePolicyError(f"the policy served at {self.url} takes {wanted[0]}x{wanted[1]} cameras and this "
+                                    f"evaluation renders {got[0][0]}x{got[0][1]}: evaluate with --camera-size "
+                                    f"{wanted[0]}x{wanted[1]}")
+
     def close(self) -> None:
         if self._client is not None:
             self._client.close()
@@ -193,6 +203,7 @@ class WebsocketPolicy(Policy):
             raise RemotePolicyError(f"not connected to the policy server at {self.url}: the connection was lost "
                                     "earlier in this episode, or reset() was not called; reset() connects")
         request = to_openpi_observation(obs, self._instruction)
+        self._check_camera_size(request)
         request.update({EPISODE_RESET: self._new_episode, EPISODE_SEED: self._seed})
         try:
             reply = self._client.infer(request)

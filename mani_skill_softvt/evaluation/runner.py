@@ -70,11 +70,12 @@ def read_records(path: Path) -> list[dict]:
     return out
 
 
-def run_records(path: Path, policy: str, obs_mode: str, control_mode: str) -> dict[tuple, dict]:
+def run_records(path: Path, policy: str, obs_mode: str, control_mode: str,
+                camera_size: tuple[int, int] | None = None) -> dict[tuple, dict]:
     """The verified records of one run configuration in ``path``, by episode key (resume matches on
-    the configuration: another policy, obs mode or control mode is another run)."""
+    the configuration: another policy, obs mode, control mode or camera size is another run)."""
     config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
-              "tactile_model": tactile_model(obs_mode)}
+              "tactile_model": tactile_model(obs_mode), "camera_size": recorded_camera_size(obs_mode, camera_size)}
     return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())}
 
 
@@ -83,10 +84,21 @@ def tactile_model(obs_mode: str) -> int | None:
     return TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
 
 
+def recorded_camera_size(obs_mode: str, camera_size: tuple[int, int] | None) -> list[int] | None:
+    """The ``camera_size`` a record of a run in ``obs_mode`` carries: the cameras' (height, width),
+    the native 224x224 unless asked otherwise; None in obs modes without images."""
+    from ..observations import NATIVE_CAMERA_SIZE
+
+    return [int(v) for v in (camera_size or NATIVE_CAMERA_SIZE)] if str(obs_mode).startswith("rgb") else None
+
+
 def record_field(rec: dict, key: str):
-    """A record's field; records from before the tactile model was kept have model 1."""
+    """A record's field; records from before the tactile model was kept have model 1, those from
+    before the camera size was kept had 224x224 cameras."""
     if key == "tactile_model" and key not in rec:
         return 1 if "tactile" in str(rec.get("obs_mode")) else None
+    if key == "camera_size" and key not in rec:
+        return recorded_camera_size(rec.get("obs_mode"), None)
     return rec.get(key)
 
 
@@ -148,13 +160,14 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
 def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) -> dict:
     """The record of an episode whose process died: a failure, nothing measured (``r_max`` None)."""
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **config,
+           "camera_size": recorded_camera_size(config["obs_mode"], config.get("camera_size")),
            "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
            "steps": None, "r_max": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
            "receipt": {"package_version": __version__, "privileged": False}}
     return _seal(rec)
 
 
-def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, queue) -> int:
+def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, camera_size, queue) -> int:
     from .policies import load_policy
     from .wrapper import make_env
 
@@ -162,7 +175,7 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
 
     def build():
         return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
-                        camera_size=getattr(policy, "camera_size", None))
+                        camera_size=camera_size)
 
     env = build()
     try:
@@ -179,17 +192,30 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
 
 
 def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1, obs_mode: str = "state_dict",
-             control_mode: str = "pd_ee_pose", progress=None, ray_address: str | None = None) -> list[dict]:
+             control_mode: str = "pd_ee_pose", progress=None, ray_address: str | None = None,
+             camera_size: tuple[int, int] | None = None) -> list[dict]:
     """Run the episodes not yet in ``out`` and return every record of the requested episodes.
 
-    Only records of the same configuration (policy, obs mode, control mode) count as done.
+    The cameras render at ``camera_size`` (height, width), by default the size the policy asks for
+    (:func:`~mani_skill_softvt.evaluation.policies.policy_camera_size`; 224x224 if none); asking a
+    policy that says another size is an error. Only records of the same configuration (policy,
+    obs mode, control mode, camera size) count as done.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
     from ..tasks.suites import get_suite
 
+    from ..observations import camera_sensor_configs
+    from .policies import policy_camera_size
+
     out = Path(out)
-    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode}
+    wanted = policy_camera_size(policy_spec)
+    if camera_size is not None and wanted is not None and tuple(camera_size) != tuple(wanted):
+        raise ValueError(f"policy {policy_spec} was trained on {wanted[0]}x{wanted[1]} cameras; evaluate it at that "
+                         f"size (leave camera_size out), not {camera_size[0]}x{camera_size[1]}")
+    camera_size = tuple(camera_size or wanted or ()) or None
+    camera_sensor_configs(camera_size)  # a size too small is an error here, naming it, not in a worker
+    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode, "camera_size": camera_size}
     done = run_records(out, **config)
     todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
@@ -201,7 +227,7 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
         batches = defaultdict(list)
         for ep in todo:
             batches[(ep["suite"], ep["task_id"])].append(ep)
-        items = [(b, policy_spec, obs_mode, control_mode) for b in batches.values()]
+        items = [(b, policy_spec, obs_mode, control_mode, camera_size) for b in batches.values()]
         in_flight, deaths = {}, 0
         for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True):
             if kind == "message":

@@ -195,13 +195,15 @@ def compare_records(stored: dict, rerun: dict, capped: bool) -> list[str]:
 
 
 def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = "rgb+tactile",
-                         control_mode: str = "pd_ee_pose", max_steps: int | None = None, fps: int = FPS) -> dict:
+                         control_mode: str = "pd_ee_pose", max_steps: int | None = None, fps: int = FPS,
+                         camera_size: tuple[int, int] | None = None) -> dict:
     """Re-run ``episode`` with the policy and write its video to ``path`` (mp4, atomically); the re-run record.
 
     ``episode`` is an evaluation record or just its (suite, task_id, condition, seed). Where it is
     a record (it has a ``deformation_trace``), the re-run is checked against it and a
     ``RuntimeWarning`` says where they differ (a non-deterministic policy, another package
-    version). ``max_steps`` truncates the episode (short previews, tests).
+    version). ``max_steps`` truncates the episode (short previews, tests). The cameras render at
+    ``camera_size``, by default the size the policy asks for, as in its evaluation.
     """
     from ..tasks import constants as C
     from ..tasks.suites import get_suite
@@ -224,7 +226,7 @@ def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = 
     limit = {"max_episode_steps": max_steps} if max_steps else {}
     policy = load_policy(policy_spec)
     env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=control_mode,
-                   camera_size=getattr(policy, "camera_size", None), **limit)
+                   camera_size=camera_size or getattr(policy, "camera_size", None), **limit)
     result = {}
 
     def write(tmp: Path) -> None:
