@@ -300,6 +300,11 @@ def test_a_grown_demo_set_renders_only_its_new_episodes(tmp_path):
         assert [f[k].attrs["seed"] for k in ("traj_0", "traj_1", "traj_2")] == [5, 7, 8]
         assert np.array_equal(f["traj_1/obs/agent/qpos"][()], first) and f["traj_2/obs/agent/qpos"].shape == (6, 9)
     assert write_rendering(traj, out, "state", observe) == (3, 0)  # nothing new
+    # Not reused: renderings of an older rendering version, or lacking what this version renders.
+    with h5py.File(out, "a") as f:
+        f["traj_0"].attrs["render_version"] = 0
+    assert write_rendering(traj, out, "state", observe) == (3, 1) and calls[-1] == 5
+    assert write_rendering(traj, out, "state", observe, needed=("tactile/left/depth",)) == (3, 3)
 
 
 def test_the_committed_samples_were_recorded_under_the_current_physics():

@@ -26,6 +26,9 @@ from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import nest
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 
+# Bump when what a rendering holds for the same states changes (cameras, shaders, observation
+# keys): renderings of an older version are then rendered again, not reused.
+RENDER_VERSION = 1
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
 
 
@@ -163,9 +166,10 @@ def episode_digest(group) -> str:
 
 def rendering_current(rendered_group, digest: str, needed: tuple[str, ...] = (), tactile_model: int | None = None) -> bool:
     """Whether a rendered episode is the rendering of the episode with ``digest`` as this version
-    renders it: its source's digest, the ``needed`` observation keys (older renderings lack the
-    depth map) and, if given, frames of that ``tactile_model``."""
-    return (rendered_group.attrs.get("states_sha256") == digest and "obs" in rendered_group
+    renders it: its source's digest, :data:`RENDER_VERSION`, the ``needed`` observation keys
+    (older renderings lack the depth map) and, if given, frames of that ``tactile_model``."""
+    return (rendered_group.attrs.get("states_sha256") == digest
+            and int(rendered_group.attrs.get("render_version", 1)) == RENDER_VERSION and "obs" in rendered_group
             and all(n in rendered_group["obs"] for n in needed)
             and (tactile_model is None or tactile_model_of(rendered_group) == tactile_model))
 
@@ -208,6 +212,7 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
                     else:
                         _render_episode(trajectory_h5, name, g, dst, obs_mode, observe_episode, tactile_model)
                         dst[name].attrs["states_sha256"] = digest
+                        dst[name].attrs["render_version"] = RENDER_VERSION
                         rendered += 1
                     n += 1
                     if progress is not None:
