@@ -41,6 +41,16 @@ def test_frame_layout_panels_and_sizes():
     assert not (frame[224:] == base[0, 0, 0]).all(axis=-1).any()
 
 
+def test_a_small_policy_camera_is_shown_enlarged_pixel_for_pixel():
+    rng = np.random.default_rng(0)
+    base, hand = (rng.integers(0, 256, (84, 84, 3), dtype=np.uint8) for _ in range(2))
+    _, _, left, right = _images()
+    frame = compose_frame(base, hand, left, right, [0.0], max_steps=300)
+    panel = frame[40:224, :224]  # below the caption
+    colours = {tuple(c) for c in base.reshape(-1, 3)}
+    assert frame.shape[0] > 224 and all(tuple(c) in colours for c in panel.reshape(-1, 3))  # no blended pixels
+
+
 def test_gauge_and_trace_turn_warning_colour_beyond_tolerance():
     width = 1048
     calm = rt_strip([0.0, 0.5, 0.8], width, 300, INSTRUCTION, success=True, dsr_success=True)

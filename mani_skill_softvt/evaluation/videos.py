@@ -23,6 +23,7 @@ from ..observations import CAMERAS, SIDES, camera_key, lookup, tactile_key
 FPS = 20  # the control rate: one frame per env step plays in real time
 STRIP_HEIGHT = 112
 MACRO_BLOCK = 16  # H.264 wants sizes divisible by 16; padding avoids imageio's silent rescale
+PANEL_HEIGHT = 224  # panels are at least this tall: an 84-px policy's cameras are shown enlarged, pixels kept
 BACKGROUND = (28, 28, 28)
 TEXT = (235, 235, 235)
 MUTED = (150, 150, 150)
@@ -54,7 +55,8 @@ def resize_to_height(image: np.ndarray, height: int) -> np.ndarray:
     if h == height:
         return image
     width = max(1, round(w * height / h))
-    interp = cv2.INTER_AREA if height < h else cv2.INTER_LINEAR  # AREA keeps the marker dots when shrinking
+    # AREA keeps the marker dots when shrinking; NEAREST shows a small camera's pixels as they are.
+    interp = cv2.INTER_AREA if height < h else cv2.INTER_NEAREST if h < PANEL_HEIGHT else cv2.INTER_LINEAR
     return cv2.resize(image, (width, height), interpolation=interp)
 
 
@@ -146,11 +148,13 @@ def compose_frame(base_rgb, hand_rgb, tactile_left, tactile_right, r_trace, *, i
     """One video frame (H, W, 3) uint8, H and W multiples of 16 (pure: no env, no I/O).
 
     Panels left to right: base camera, wrist camera, left and right tactile images (scaled to the
-    base camera's height; the sensor has drawn the markers already). Below them the strip of
-    ``rt_strip``: ``r_trace`` is R_t from the reset to the current step.
+    base camera's height, at least :data:`PANEL_HEIGHT`; the sensor has drawn the markers already).
+    Below them the strip of ``rt_strip``: ``r_trace`` is R_t from the reset to the current step.
     """
     base = as_image(base_rgb)
-    height = base.shape[0]
+    height = max(base.shape[0], PANEL_HEIGHT)
+    if base.shape[0] < height:  # a small camera (a policy's 84 px) enlarged pixel for pixel: what the policy saw
+        base = cv2.resize(base, (round(base.shape[1] * height / base.shape[0]), height), interpolation=cv2.INTER_NEAREST)
     panels = [_label(base, "base camera"), _label(resize_to_height(as_image(hand_rgb), height), "wrist camera"),
               _label(resize_to_height(as_image(tactile_left), height), "tactile left"),
               _label(resize_to_height(as_image(tactile_right), height), "tactile right")]
