@@ -161,7 +161,7 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     from .physics.constants import physics_signature, signature_mismatch
 
     if accepted is not None and not 1 <= accepted <= num:
-        raise ValueError(f"accepted={accepted}: ask for 1 to num ({num}) accepted demos per task")
+        raise ValueError(f"--accepted {accepted}: give 1 to --num ({num}); --num caps the seeds a task draws")
     planner = planner or DEFAULT_PLANNER
     demo_set = DemoSet(out, suite)
     if demo_set.manifest.exists():  # resuming: the new episodes must come from the same physics
@@ -424,10 +424,11 @@ def main(argv=None):
         tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
         if args.num < 1 or args.workers < 1:
             ap.error("--num and --workers must be >= 1")
-        if args.accepted is not None and not 1 <= args.accepted <= args.num:
-            ap.error(f"--accepted {args.accepted}: give 1 to --num ({args.num}); --num caps the seeds a task draws")
-        report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
-                          planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
+        try:
+            report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
+                              planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
+        except ValueError as err:  # a bad --accepted, or a set recorded under other physics or actions
+            ap.error(str(err))
         for r in report["tasks"]:
             print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
                   + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
