@@ -141,18 +141,24 @@ def episode_frames(trajectory_group, rendered_group) -> dict[str, np.ndarray]:
 
 def load_frames(demos_root: Path, suite: str, tasks: list[int], camera_size, heldout_fraction: float) -> dict:
     """Every frame of the rendered demos, with a ``heldout`` flag (the last demos of each task) and
-    the episode index (for the validation split)."""
+    the episode index (for the validation split). Only episodes whose rendering is current are
+    read (a demo set still being rendered has fewer); ``skipped`` counts the others."""
     from ..data.demo_set import DemoSet
-    from ..data.trajectory import open_h5
+    from ..data.trajectory import episode_digest, open_h5, rendering_current
 
     demo_set = DemoSet(demos_root, suite)
     sources = demo_set.rendered_sources(tasks, "rgb+tactile", camera_size)
     out: dict[str, list] = {}
-    episode = 0
+    episode = skipped = 0
     with tqdm(total=len(sources), desc="read demos", unit="task") as bar:
         for src in sources:
             with open_h5(src.trajectory_h5) as ft, open_h5(src.rendered_h5) as fr:
-                names = sorted(ft.keys(), key=lambda k: int(k.split("_")[1]))
+                names = [k for k in sorted(ft.keys(), key=lambda k: int(k.split("_")[1]))
+                         if k in fr and rendering_current(fr[k], episode_digest(ft[k]))]
+                skipped += len(ft.keys()) - len(names)
+                if len(names) < 2:
+                    raise ValueError(f"{src.rendered_h5}: {len(names)} rendered demos; probes need at least 2 a task "
+                                     f"(demos render --camera-size ...)")
                 n_train = len(names) - max(1, round(heldout_fraction * len(names)))
                 for i, name in enumerate(names):
                     frames = episode_frames(ft[name], fr[name])
@@ -163,7 +169,7 @@ def load_frames(demos_root: Path, suite: str, tasks: list[int], camera_size, hel
                     for k, v in frames.items():
                         out.setdefault(k, []).append(v)
             bar.update()
-    return {k: np.concatenate(v) for k, v in out.items()}
+    return {**{k: np.concatenate(v) for k, v in out.items()}, "skipped": skipped}
 
 
 # ------------------------------------------------------------------------------------- probing
@@ -220,6 +226,7 @@ def run(demos_root: Path, suite: str, tasks: list[int], camera_size, heldout_fra
     data = load_frames(demos_root, suite, tasks, camera_size, heldout_fraction)
     result = {"suite": suite, "tasks": tasks, "frames": int(len(data["force"])),
               "frames_heldout": int(data["heldout"].sum()), "episodes": int(data["episode"].max() + 1),
+              "episodes_not_yet_rendered": int(data["skipped"]),
               "contact_share": float(data["contact"].mean()),
               "slip_share_in_contact": float(data["slip"][data["contact"]].mean()),
               "slip_speed_m_s": SLIP_SPEED, "probes": {}}
