@@ -265,7 +265,7 @@ def plot_result(result: dict, path: Path) -> None:
     ax.axhline(0.5, color="0.6", lw=0.8, ls=":")  # chance AUC
     ax.set_ylim(min(0.0, ax.get_ylim()[0]), 1.0)
     ax.set_title(f"linear probes on held-out demos ({result['suite']})")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower center", ncol=3, framealpha=0.9)
     fig.tight_layout()
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
     plt.close(fig)
