@@ -357,7 +357,7 @@ def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(t
     assert (tmp_path / "runs" / "vo-c" / "vo-c-tiny" / "snapshots" / "vo-c-tiny_step000004.pt").exists()
     search.main(argv)  # nothing new
     assert len((tmp_path / "results" / "vo-c.jsonl").read_text().splitlines()) == 3
-    assert f"| tiny ({rows[6]['run'][:6]}) | 6 |" in search.main(["--results", str(tmp_path / "results"), "--table"])
+    assert f"| tiny ({rows[6]['run'][:6]}) | 2 / 1 | 6 |" in search.main(["--results", str(tmp_path / "results"), "--table"])
     # Another held-out split (or an edited recipe) is another run: its results never hide behind these.
     cfg = search.recipe_config("vo-c", "tiny", 1)
     assert search.run_id(cfg, "k") != search.run_id(search.recipe_config("vo-c", "tiny", 2), "k")

@@ -105,12 +105,12 @@ def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, re
 def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
     """The logged results, one row per (recipe, step), by recipe then step."""
     rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["run"], r["step"]))
-    head = ("| recipe (run) | step | training min | held-out pos mm | 1st action mm | rot deg | gripper | training pos mm |\n"
-            "|---|---|---|---|---|---|---|---|")
-    lines = [f"{variant}: open-loop error on {rows[0]['episodes_heldout'] if rows else 0} held-out demos", "", head]
+    head = ("| recipe (run) | demos trained / held out | step | training min | held-out pos mm | 1st action mm | rot deg "
+            "| gripper | training pos mm |\n|---|---|---|---|---|---|---|---|---|")
+    lines = [f"{variant}: open-loop error of the executed actions at every replanning step", "", head]
     for r in rows:
         h, t = r["heldout"], r["training"]
-        lines.append(f"| {r['recipe']} ({r['run'][:6]}) | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
+        lines.append(f"| {r['recipe']} ({r['run'][:6]}) | {r['episodes_trained']} / {r['episodes_heldout']} | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
                      f"{h['position_mm_first_action']:.1f} | {h['rotation_deg_mean']:.2f} | {h['gripper_mean']:.3f} | "
                      f"{t['position_mm_mean']:.1f} |")
     return "\n".join(lines)
