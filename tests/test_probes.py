@@ -2,7 +2,13 @@
 
 import numpy as np
 
-from mani_skill_softvt.baselines.probes import balanced_accuracy, r2, ridge_fit, roc_auc, slip_labels
+from mani_skill_softvt.baselines.probes import (
+    balanced_accuracy,
+    r2,
+    ridge_fit,
+    roc_auc,
+    slip_labels,
+)
 
 
 def test_slip_is_relative_motion_in_contact_above_the_threshold():

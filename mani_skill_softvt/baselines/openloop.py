@@ -26,6 +26,7 @@ from ..paths import DEMOS_DIR
 from .agent import GRIPPER, executed_actions
 from .dataset import DemoWindows, load_windows
 
+
 def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
     """Per action of (..., 7) base-frame actions (xyz, axis-angle, closure): the position error (m),
     the angle of the rotation between the two orientations (rad) and the closure error."""

@@ -32,7 +32,14 @@ from tqdm import tqdm
 
 from ..data.images import resize_image
 from ..fileio import atomic_write, atomic_write_json
-from ..observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, tactile_key
+from ..observations import (
+    CAMERAS,
+    MARKER_FIELDS,
+    SIDES,
+    TCP_POSE,
+    camera_key,
+    tactile_key,
+)
 from ..paths import DEMOS_DIR, REPO_DIR
 
 SLIP_SPEED = 1e-3  # m/s: an object moving 0.05 mm per 50-ms step relative to the fingers slips
@@ -218,13 +225,13 @@ def probe(data: dict, inputs: str) -> dict:
     # Call as many frames slipping as slipped in training.
     threshold = np.quantile(train_score, 1 - data["slip"][c_train].mean())
     out["slip"] = {"auc": roc_auc(labels, score), "balanced_accuracy": balanced_accuracy(labels, score > threshold),
-                   "positives_heldout": int(labels.sum()), "frames_heldout": int(len(labels)), "lambda": lam}
+                   "positives_heldout": int(labels.sum()), "frames_heldout": len(labels), "lambda": lam}
     return out
 
 
 def run(demos_root: Path, suite: str, tasks: list[int], camera_size, heldout_fraction: float) -> dict:
     data = load_frames(demos_root, suite, tasks, camera_size, heldout_fraction)
-    result = {"suite": suite, "tasks": tasks, "frames": int(len(data["force"])),
+    result = {"suite": suite, "tasks": tasks, "frames": len(data["force"]),
               "frames_heldout": int(data["heldout"].sum()), "episodes": int(data["episode"].max() + 1),
               "episodes_not_yet_rendered": int(data["skipped"]),
               "contact_share": float(data["contact"].mean()),
@@ -236,10 +243,11 @@ def run(demos_root: Path, suite: str, tasks: list[int], camera_size, heldout_fra
 
 
 def format_result(result: dict) -> str:
-    lines = [f"{result['suite']}: {result['episodes']} demos, {result['frames']} frames "
+    title = (f"{result['suite']}: {result['episodes']} demos, {result['frames']} frames "
              f"({result['frames_heldout']} held out); in contact {100 * result['contact_share']:.0f} % of frames, "
              f"slipping (> {1e3 * result['slip_speed_m_s']:.0f} mm/s) in {100 * result['slip_share_in_contact']:.1f} % "
-             "of those", "",
+             "of those")
+    lines = [title, "",
              "| input | force R^2 (all) | force R^2 (contact) | R_t R^2 (all) | R_t R^2 (contact) | slip AUC | slip bal. acc. |",
              "|---|---|---|---|---|---|---|"]
     for inputs, p in result["probes"].items():

@@ -80,9 +80,8 @@ def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, re
     """Log the open-loop error of every snapshot of ``run`` not yet logged; the new lines."""
     import torch
 
-    from .openloop import openloop
-
     from .config import DPConfig
+    from .openloop import openloop
 
     done = measured(variant, results_dir)
     new = []

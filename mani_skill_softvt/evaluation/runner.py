@@ -29,7 +29,6 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-
 from .. import __version__
 from ..fileio import append_jsonl, read_jsonl_lines
 from ..observations import info_bool
@@ -203,9 +202,8 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
-    from ..tasks.suites import get_suite
-
     from ..observations import camera_sensor_configs
+    from ..tasks.suites import get_suite
     from .policies import policy_camera_size
 
     out = Path(out)
