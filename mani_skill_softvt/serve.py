@@ -25,7 +25,7 @@ import traceback
 import numpy as np
 
 from . import __version__
-from .evaluation.policies import BUILTIN, load_policy
+from .evaluation.policies import BUILTIN, load_policy, policy_camera_size
 from .policy import is_privileged
 from .evaluation.remote import (ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, PROMPT_KEY, QPOS_KEY, TACTILE_MARKERS,
                                 TCP_POSE_KEY, tactile_wire_key)
@@ -77,11 +77,6 @@ def make_policy_factory(spec: str):
         raise ValueError(f"policy '{spec}' is privileged (it needs the env) and cannot be served")
     return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
 
-
-def camera_size_of(spec: str) -> list[int] | None:
-    """The camera size the served policy asks for (told to clients in the metadata), if any."""
-    size = getattr(load_policy(spec), "camera_size", None)
-    return None if size is None else [int(v) for v in size]
 
 
 def _chunk(policy, obs: dict) -> np.ndarray:
@@ -144,7 +139,8 @@ def main(argv=None) -> None:
     except ValueError as e:
         ap.error(str(e))
     try:
-        server = build_server(factory, name, args.host, args.port, camera_size_of(args.policy))
+        size = policy_camera_size(args.policy)  # what the evaluator would render for it in process
+        server = build_server(factory, name, args.host, args.port, None if size is None else list(size))
     except OSError as e:  # port taken, address not local
         ap.error(f"cannot listen on {args.host}:{args.port}: {e}; choose another --port (0: any free one)")
     with server:

@@ -84,12 +84,20 @@ def run_dir_of(policy_path: Path) -> Path:
     return parent.parent if parent.name == "snapshots" else parent
 
 
-def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, threads: int = 2,
-             progress: bool = True, write: bool = True) -> dict:
-    """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
-    docstring); ``write`` puts them in ``openloop.json`` beside it."""
-    from .agent import load_policy_file
+def load_run_windows(cfg, run: Path, demos_root: Path) -> tuple[DemoWindows, DemoWindows]:
+    """The held-out and training windows of the run in ``run`` (through its caches)."""
     from .train import CACHE
+
+    return (load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True),
+            load_windows(cfg, demos_root, run / CACHE))
+
+
+def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, threads: int = 2,
+             progress: bool = True, write: bool = True, windows: tuple[DemoWindows, DemoWindows] | None = None) -> dict:
+    """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
+    docstring); ``write`` puts them in ``openloop.json`` beside it. ``windows``: the run's
+    (held-out, training) windows when the caller has them (several snapshots of one run)."""
+    from .agent import load_policy_file
 
     policy_path = Path(policy_path)
     cfg, model, ckpt = load_policy_file(policy_path)
@@ -97,18 +105,17 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
         raise ValueError(f"{policy_path} was trained on every demo (heldout_per_task=0): nothing is held out. Train "
                          "with `--set heldout_per_task=10` (the last 10 demos of each task are then never trained on)")
     torch.set_num_threads(threads)
-    run = run_dir_of(policy_path)
-    heldout = load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True)
-    training = load_windows(cfg, demos_root, run / CACHE)
+    heldout, training = windows or load_run_windows(cfg, run_dir_of(policy_path), demos_root)
     if ckpt.get("data_key") not in (None, training.key):
         raise ValueError(f"{policy_path} was trained on other demos than {demos_root} now holds (its episodes "
                          "changed): the held-out ones might have been trained on. Measure it on the demos it was "
                          "trained on, or train again")
-    out = {"policy": str(policy_path), "steps": ckpt.get("steps"), "episodes_trained": training.episodes,
+    out = {"policy": str(policy_path), "steps": ckpt.get("steps"), "train_wall_s": ckpt.get("train_wall_s"),
+           "config": ckpt["config"], "episodes_trained": training.episodes,
            "episodes_heldout": heldout.episodes, "camera_render_size": list(heldout.camera_render_size)}
-    for name, windows in (("heldout", heldout), ("training", training)):
-        idx = replan_indices(windows, cfg.action_steps, limit)
-        out[name] = summarize_errors(chunk_errors(model, windows, idx, seed=cfg.seed, progress=progress))
+    for name, data in (("heldout", heldout), ("training", training)):
+        idx = replan_indices(data, cfg.action_steps, limit)
+        out[name] = summarize_errors(chunk_errors(model, data, idx, seed=cfg.seed, progress=progress))
     if write:
         atomic_write_json(policy_path.parent / "openloop.json", out)
     return out

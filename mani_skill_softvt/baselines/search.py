@@ -75,25 +75,25 @@ def snapshot_step(path: Path) -> int:
     return int(Path(path).stem.rsplit("_step", 1)[1])
 
 
-def measure_snapshots(variant: str, recipe: str, run: Path, demos_root: Path, results_dir: Path, windows: int,
+def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Path, results_dir: Path, windows: int,
                       threads: int) -> list[dict]:
-    """Log the open-loop error of every snapshot of ``run`` not yet logged; the new lines."""
-    import torch
-
-    from .config import DPConfig
-    from .openloop import openloop
+    """Log the open-loop error of every snapshot of the run of ``cfg`` in ``run`` not yet logged;
+    the new lines. The run's data is read once for all its snapshots."""
+    from .openloop import load_run_windows, openloop
+    from .train import CHECKPOINT, load_checkpoint
 
     done = measured(variant, results_dir)
+    todo = sorted((run / "snapshots").glob("*.pt"), key=snapshot_step)
+    if not todo:
+        return []
+    identity = run_id(cfg, load_checkpoint(run / CHECKPOINT).get("data_key", ""))
+    todo = [s for s in todo if (identity, snapshot_step(s)) not in done]
+    data = load_run_windows(cfg, run, demos_root) if todo else None
     new = []
-    for snap in sorted((run / "snapshots").glob("*.pt"), key=snapshot_step):
-        ckpt = torch.load(snap, map_location="cpu", weights_only=False)
-        cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
-        identity = run_id(cfg, ckpt.get("data_key", ""))
-        if (identity, snapshot_step(snap)) in done:
-            continue
-        result = openloop(snap, demos_root, windows, threads, progress=False, write=False)
-        line = {"run": identity, "recipe": recipe, "config": ckpt["config"],
-                "step": snapshot_step(snap), "train_wall_s": round(float(ckpt.get("train_wall_s", 0.0)), 1),
+    for snap in todo:
+        result = openloop(snap, demos_root, windows, threads, progress=False, write=False, windows=data)
+        line = {"run": identity, "recipe": recipe, "config": result["config"],
+                "step": snapshot_step(snap), "train_wall_s": round(float(result["train_wall_s"] or 0.0), 1),
                 "episodes_trained": result["episodes_trained"], "episodes_heldout": result["episodes_heldout"],
                 "heldout": result["heldout"], "training": result["training"], "policy": snap.name}
         append_jsonl(results_path(variant, results_dir), line)
@@ -149,7 +149,7 @@ def main(argv=None) -> str:
         cfg = recipe_config(args.variant, recipe, args.heldout, threads=args.threads, demos_per_task=args.demos_per_task)
         run = args.runs / args.variant / f"{args.variant}-{recipe}"  # its records and snapshots say both
         policy = train(cfg, args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every)
-        for line in measure_snapshots(args.variant, recipe, run, args.demos, args.results, args.windows, args.threads):
+        for line in measure_snapshots(args.variant, recipe, run, cfg, args.demos, args.results, args.windows, args.threads):
             print(f"{recipe} step {line['step']}: held-out {line['heldout']['position_mm_mean']:.1f} mm, "
                   f"training {line['training']['position_mm_mean']:.1f} mm")
         if not policy.exists():
