@@ -26,10 +26,19 @@ import numpy as np
 
 from . import __version__
 from .evaluation.policies import BUILTIN, load_policy, policy_camera_size
-from .policy import is_privileged
-from .evaluation.remote import (ACTION_DIM, CAMERAS, EPISODE_RESET, EPISODE_SEED, PROMPT_KEY, QPOS_KEY, TACTILE_MARKERS,
-                                TCP_POSE_KEY, tactile_wire_key)
+from .evaluation.remote import (
+    ACTION_DIM,
+    CAMERAS,
+    EPISODE_RESET,
+    EPISODE_SEED,
+    PROMPT_KEY,
+    QPOS_KEY,
+    TACTILE_MARKERS,
+    TCP_POSE_KEY,
+    tactile_wire_key,
+)
 from .observations import QPOS, SIDES, TCP_POSE, camera_key, nest, tactile_key
+from .policy import is_privileged
 
 DEFAULT_PORT = 8000  # openpi's default
 
