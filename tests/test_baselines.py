@@ -107,6 +107,44 @@ def test_config_presets_and_overrides():
         parse_override("learning_rate=1")
     with pytest.raises(ValueError, match="variant"):
         make_config("vt-x")
+    assert (make_config("vo-c").precision, paper.precision) == ("bf16", "fp32")
+    with pytest.raises(ValueError, match="precision"):
+        make_config("vo-c", precision="fp16")
+
+
+def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
+    # bfloat16 keeps 8 significant bits: each product is rounded by at most 2^-9 relative, and the
+    # errors of a few dozen layers add up at random (sqrt(n) 2^-9, ~2 %). The same weights in
+    # float32 and bf16 give features and noise predictions that close, in float32; channels-last
+    # is only another memory layout (float32 summation-order differences, ~1e-6).
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
+    from mani_skill_softvt.baselines.networks import ImageEncoder
+
+    cfg32 = make_config("vt-c", **{**TINY, "precision": "fp32"})
+    cfg16 = make_config("vt-c", **{**TINY, "precision": "bf16"})
+    torch.manual_seed(0)
+    m32 = DiffusionPolicyModel(cfg32, T.empty_stats(cfg32))
+    m16 = DiffusionPolicyModel(cfg16, T.empty_stats(cfg16))
+    m16.load_state_dict(m32.state_dict())
+    g = torch.Generator().manual_seed(1)
+    obs = {"state": torch.rand(3, 2, 7, generator=g), "markers": torch.randn(3, 2, 2, 99, 2, generator=g)}
+    for k in m32.image_keys:
+        h, w = cfg32.tactile_size if k.startswith("tactile") else cfg32.camera_size
+        obs[k] = torch.randint(0, 256, (3, 2, h, w, cfg32.tactile_channels if k.startswith("tactile") else 3),
+                               generator=g, dtype=torch.uint8)
+    with torch.no_grad():
+        c32, c16 = m32.encode(obs), m16.encode(obs)
+        x, t = torch.randn(3, 16, 7, generator=g), torch.tensor([0, 7, 19])
+        e32, e16 = m32.denoise(x, t, c32), m16.denoise(x, t, c32)
+    assert c16.dtype == e16.dtype == torch.float32
+    rel = lambda a, b: float((a - b).norm() / b.norm())  # noqa: E731
+    assert 0 < rel(c16, c32) < 0.03 and 0 < rel(e16, e32) < 0.03
+    nchw = ImageEncoder(3, (4, 8), (1, 1), 8)
+    nhwc = ImageEncoder(3, (4, 8), (1, 1), 8, channels_last=True)
+    nhwc.load_state_dict(nchw.state_dict())
+    img = torch.rand(2, 3, 16, 16, generator=g)
+    with torch.no_grad():
+        assert torch.allclose(nhwc(img), nchw(img), rtol=1e-5, atol=1e-6)
 
 
 def test_paper_preset_has_the_papers_parameter_count():

@@ -33,6 +33,11 @@ Where this differs from the paper, and why:
 - Images are augmented by a random shift of ``shift_fraction`` of their size (edges replicated);
   Diffusion Policy random-crops about 10 %.
 - ``paper`` is meant for a GPU (``device="cuda"``); it has not been run here.
+- ``cpu`` trains and samples in bfloat16 mixed precision (``precision="bf16"``: the encoders'
+  and the U-Net's matrix products under ``torch.autocast``; weights, optimiser, normalisers, the
+  spatial softmax and the loss stay float32). On this machine's AVX-512 BF16 cores a training step
+  takes about half the float32 time at the same held-out error (benchmarks/bench_train_step.py,
+  docs/baselines.md); ``precision="fp32"`` is the reference.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ VARIANTS = ("vo-c", "vt-c", "vo-b", "vt-b")
 PRESETS = ("paper", "cpu")
 TACTILE_INPUTS = ("rgb", "rgb+depth")
 SCHEDULERS = ("ddpm", "ddim")
+PRECISIONS = ("fp32", "bf16")
 
 
 @dataclass(frozen=True)
@@ -92,6 +98,7 @@ class DPConfig:
     seed: int = 0
     threads: int = 2  # torch intra-op threads while training (the machine's cores); 0: torch's default
     device: str = "cpu"  # where training runs ("cuda" for the paper preset)
+    precision: str = "fp32"  # "bf16": mixed precision for the networks' products (the cpu preset's)
     # -- data
     suite: str = "object_soft"
     tasks: tuple[int, ...] = tuple(range(10))
@@ -105,6 +112,8 @@ class DPConfig:
             raise ValueError(f"tactile_inputs {self.tactile_inputs!r}: choose one of {TACTILE_INPUTS}")
         if self.inference_scheduler not in SCHEDULERS:
             raise ValueError(f"inference_scheduler {self.inference_scheduler!r}: choose one of {SCHEDULERS}")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision {self.precision!r}: choose one of {PRECISIONS}")
         if (self.epochs is None) == (self.steps is None):
             raise ValueError(f"set exactly one of epochs ({self.epochs}) and steps ({self.steps})")
         if not 1 <= self.action_steps <= self.action_horizon:
@@ -144,7 +153,7 @@ _PAPER = dict(preset="paper", camera_size=(224, 224), tactile_size=(240, 320), e
               encoder_blocks=(2, 2, 2, 2), resnet_stem=True, image_feature_dim=512, unet_dims=(512, 1024, 2048), timestep_embed_dim=128,
               train_timesteps=100, inference_timesteps=100, inference_scheduler="ddpm", batch_size=256, epochs=20.0,
               steps=None, checkpoint_every=1000, threads=0, device="cuda", demos_per_task=100)
-_CPU: dict = dict(preset="cpu")
+_CPU: dict = dict(preset="cpu", precision="bf16")
 
 
 def make_config(variant: str, preset: str = "cpu", **overrides) -> DPConfig:

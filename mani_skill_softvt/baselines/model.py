@@ -6,9 +6,15 @@ prediction, squared-cosine noise schedule).
 Normalisation as Diffusion Policy does it: actions, state and marker motion are mapped
 min-max to [-1, 1] with the training set's ranges (a constant column is only centred), images
 to [-1, 1]. The ranges are buffers of the module, so a checkpoint carries them.
+
+With ``precision="bf16"`` the encoders and the U-Net run under ``torch.autocast`` (bfloat16
+products, float32 weights); their outputs come back as float32, so the normalisers, the loss and
+the sampler's arithmetic stay float32.
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import torch
 from diffusers import DDIMScheduler, DDPMScheduler
@@ -62,7 +68,7 @@ class DiffusionPolicyModel(nn.Module):
         self.image_keys = image_keys(cfg)
         self.encoders = nn.ModuleDict({
             k: ImageEncoder(cfg.tactile_channels if k.startswith("tactile") else 3, cfg.encoder_widths,
-                            cfg.encoder_blocks, cfg.image_feature_dim, resnet_stem=cfg.resnet_stem)
+                            cfg.encoder_blocks, cfg.image_feature_dim, resnet_stem=cfg.resnet_stem, channels_last=True)
             for k in self.image_keys})
         self.normalize = nn.ModuleDict({k: RangeNormalizer(*stats[k]) for k in self.low_dim_keys + ["action"]})
         per_frame = len(self.image_keys) * cfg.image_feature_dim + cfg.state_dim
@@ -71,6 +77,20 @@ class DiffusionPolicyModel(nn.Module):
         self.global_cond_dim = per_frame * cfg.obs_horizon
         self.unet = ConditionalUnet1D(cfg.action_dim, self.global_cond_dim, cfg.unet_dims, cfg.unet_kernel,
                                       cfg.unet_groups, cfg.timestep_embed_dim)
+
+    def mixed_precision(self):
+        """The autocast context of the config's precision (a no-op for fp32)."""
+        if self.cfg.precision != "bf16":
+            return contextlib.nullcontext()
+        return torch.autocast(device_type=self.scale_device().type, dtype=torch.bfloat16)
+
+    def scale_device(self) -> torch.device:
+        return self.normalize["action"].scale.device
+
+    def denoise(self, sample: torch.Tensor, step: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """The U-Net's noise prediction, float32 whatever the precision."""
+        with self.mixed_precision():
+            return self.unet(sample, step, cond).float()
 
     @property
     def low_dim_keys(self) -> list[str]:
@@ -82,7 +102,9 @@ class DiffusionPolicyModel(nn.Module):
         parts = []
         for k in self.image_keys:
             x = images_to_unit(obs[k]).flatten(0, 1)  # (B*T, C, H, W): the frames share the encoder
-            parts.append(self.encoders[k](x).reshape(b, t, -1))
+            with self.mixed_precision():
+                features = self.encoders[k](x)
+            parts.append(features.float().reshape(b, t, -1))
         for k in self.low_dim_keys:
             parts.append(self.normalize[k](obs[k].reshape(b, t, -1).float()))
         return torch.cat(parts, dim=-1).reshape(b, -1)
@@ -97,7 +119,7 @@ class DiffusionPolicyModel(nn.Module):
         steps = torch.randint(0, scheduler.config.num_train_timesteps, (target.shape[0],), generator=generator)
         noisy = scheduler.add_noise(target, noise, steps.to(target.device))
         steps = steps.to(target.device)
-        return nn.functional.mse_loss(self.unet(noisy, steps, cond), noise)
+        return nn.functional.mse_loss(self.denoise(noisy, steps, cond), noise)
 
     @torch.no_grad()
     def sample(self, obs: dict[str, torch.Tensor], generator: torch.Generator, scheduler) -> torch.Tensor:
@@ -107,6 +129,6 @@ class DiffusionPolicyModel(nn.Module):
         x = x.to(cond.device)
         scheduler.set_timesteps(self.cfg.inference_timesteps)
         for t in scheduler.timesteps:
-            eps = self.unet(x, t.expand(x.shape[0]).to(cond.device), cond)
+            eps = self.denoise(x, t.expand(x.shape[0]).to(cond.device), cond)
             x = scheduler.step(eps, t, x, generator=generator).prev_sample
         return self.normalize["action"].inverse(x)

@@ -173,6 +173,9 @@ def load_checkpoint(path: Path) -> dict:
 def check_same_run(ckpt: dict, cfg: DPConfig, path: Path, data_key: str | None = None, steps: int | None = None) -> None:
     """Refuse to resume ``ckpt`` with another configuration, other demonstrations (regenerated or
     re-rendered: other normalisers and batches) or another length (another schedule)."""
+    if "precision" not in ckpt.get("config", {}):
+        raise ValueError(f"{path} was written by an older version of this package (before the precision field; it "
+                         "trained in float32 throughout): train into another --out, or delete it to start over")
     if ckpt.get("config") != cfg.to_dict():
         diff = sorted(k for k in cfg.to_dict() if ckpt.get("config", {}).get(k) != cfg.to_dict()[k])
         raise ValueError(f"{path} is a run with another configuration (differs in {diff}); train into another "

@@ -1,0 +1,108 @@
+"""What a training step and a denoised chunk of the CPU Diffusion Policy baselines cost, by precision.
+
+    .venv/bin/python benchmarks/bench_train_step.py [--steps 20] [--threads 1] [--variants vo-c vt-c]
+
+For each variant (``cpu`` preset, batch 32, 84 px cameras) a full optimiser step of
+``baselines.train.Training`` (random shift, encoders, U-Net loss, backward, AdamW, EMA) on a fixed
+synthetic batch, and one denoised chunk as the agent samples it (batch 1, 16 DDIM steps), in three
+settings: float32 with contiguous (NCHW) images, the reference and what the package trained with
+before; float32 with channels-last images; and the preset's bfloat16 autocast with channels-last.
+``x fp32`` divides by the reference measured in this run, so machines compare. The cost does not
+depend on the weights or the pixel values, so untrained weights and random images are timed.
+One thread is what each of the campaign's two parallel training runs gets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+SETTINGS = (("fp32", False), ("fp32", True), ("bf16", True))  # (precision, channels-last images)
+
+
+class SyntheticWindows:
+    """A stand-in for ``dataset.DemoWindows`` that returns one fixed random batch of the right shapes."""
+
+    def __init__(self, cfg, model, seed: int = 0):
+        rng = np.random.default_rng(seed)
+        b, t = cfg.batch_size, cfg.obs_horizon
+        obs = {"state": rng.uniform(-1, 1, (b, t, cfg.state_dim)).astype(np.float32)}
+        for k in model.image_keys:
+            h, w = cfg.tactile_size if k.startswith("tactile") else cfg.camera_size
+            c = cfg.tactile_channels if k.startswith("tactile") else 3
+            obs[k] = rng.integers(0, 256, (b, t, h, w, c), dtype=np.uint8)
+        if cfg.tactile:
+            obs["markers"] = rng.normal(0, 2, (b, t, 2, cfg.marker_count, 2)).astype(np.float32)
+        self.obs = obs
+        self.actions = rng.uniform(-1, 1, (b, cfg.action_horizon, cfg.action_dim)).astype(np.float32)
+
+    def __len__(self) -> int:
+        return 10_000
+
+    def batch(self, indices):
+        return {k: torch.from_numpy(v.copy()) for k, v in self.obs.items()}, torch.from_numpy(self.actions.copy())
+
+
+def use_channels_last(model, on: bool) -> None:
+    """Switch the model's image encoders between NHWC and NCHW weights and inputs."""
+    for encoder in model.encoders.values():
+        encoder.channels_last = on
+        encoder.to(memory_format=torch.channels_last if on else torch.contiguous_format)
+
+
+def time_setting(variant: str, precision: str, channels_last: bool, steps: int, chunks: int) -> tuple[float, float]:
+    """(ms per training step, ms per denoised chunk) of one setting."""
+    from mani_skill_softvt.baselines.config import make_config
+    from mani_skill_softvt.baselines.model import noise_scheduler
+    from mani_skill_softvt.baselines.train import Training, empty_stats
+
+    cfg = make_config(variant, "cpu", precision=precision, threads=0)
+    run = Training(cfg, empty_stats(cfg), steps=steps + 3)
+    use_channels_last(run.model, channels_last)
+    data = SyntheticWindows(cfg, run.model)
+    for _ in range(3):  # warm-up: oneDNN picks its kernels on the first calls
+        run.train_step(data)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        run.train_step(data)
+    step_ms = 1e3 * (time.perf_counter() - t0) / steps
+    model = run.model.eval()
+    obs = {k: v[:1] for k, v in data.batch(None)[0].items()}
+    scheduler, generator = noise_scheduler(cfg, inference=True), torch.Generator().manual_seed(0)
+    model.sample(obs, generator, scheduler)
+    t0 = time.perf_counter()
+    for _ in range(chunks):
+        model.sample(obs, generator, scheduler)
+    return step_ms, 1e3 * (time.perf_counter() - t0) / chunks
+
+
+def main(argv=None) -> str:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--steps", type=int, default=20, help="timed optimiser steps per setting")
+    ap.add_argument("--chunks", type=int, default=10, help="timed denoised chunks per setting")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--variants", nargs="+", default=["vo-c", "vt-c"])
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s)", "",
+             "| variant | precision | images | step ms | x fp32 | steps/s | chunk ms | x fp32 |",
+             "|---|---|---|---|---|---|---|---|"]
+    for variant in args.variants:
+        ref = None
+        for precision, cl in SETTINGS:
+            step_ms, chunk_ms = time_setting(variant, precision, cl, args.steps, args.chunks)
+            ref = ref or (step_ms, chunk_ms)
+            lines.append(f"| {variant} | {precision} | {'channels-last' if cl else 'NCHW'} | {step_ms:.1f} | "
+                         f"{step_ms / ref[0]:.2f} | {1e3 / step_ms:.2f} | {chunk_ms:.1f} | {chunk_ms / ref[1]:.2f} |")
+            print(lines[-1], flush=True)
+    table = "\n".join(lines)
+    print()
+    print(table)
+    return table
+
+
+if __name__ == "__main__":
+    main()
