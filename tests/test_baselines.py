@@ -7,6 +7,7 @@ shrunk with config overrides. The real training and evaluation runs are in docs/
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import h5py
@@ -180,14 +181,51 @@ def test_windows_pad_at_the_episode_edges_and_never_cross_them(tmp_path):
 def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, monkeypatch):
     ds = _write_demos(tmp_path / "demos")
     cfg = make_config("vo-c", **TINY)
-    cache = tmp_path / "cache.npz"
+    cache = tmp_path / "cache"
     w1 = load_windows(cfg, tmp_path / "demos", cache)
-    mtime = cache.stat().st_mtime_ns
+    entry = cache / w1.key
+    mtime = (entry / "meta.json").stat().st_mtime_ns
+    assert isinstance(w1.frames["base"], np.memmap)  # read from the files, not held in memory
+    fresh = load_windows(cfg, tmp_path / "demos", None)
+    assert all(np.array_equal(fresh.frames[k], w1.frames[k]) for k in fresh.frames)
+    assert np.array_equal(fresh.actions, w1.actions) and fresh.camera_render_size == w1.camera_render_size
     monkeypatch.chdir(tmp_path)  # the same files named by a relative path are the same data
     w2 = load_windows(cfg, Path("demos"), cache)
-    assert cache.stat().st_mtime_ns == mtime and np.array_equal(w1.frames["base"], w2.frames["base"])
+    assert (entry / "meta.json").stat().st_mtime_ns == mtime and np.array_equal(w1.frames["base"], w2.frames["base"])
+    # Another run reading the same episodes the same way shares the entry; other inputs get their own.
+    assert load_windows(make_config("vo-c", **{**TINY, "lr": 1e-3}), tmp_path / "demos", cache).key == w1.key
     w3 = load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
-    assert w3.frames["base"].shape[1:3] == (8, 8)
+    assert w3.frames["base"].shape[1:3] == (8, 8) and sorted(p.name for p in cache.iterdir()) == sorted([w1.key, w3.key])
+    # A temporary directory of a process that died is removed; an older version's cache file is refused.
+    from mani_skill_softvt.baselines import dataset as D
+
+    dead = cache / f".{w3.key}.tmp-{D.boot_id()}-999999999"
+    dead.mkdir()
+    shutil.rmtree(cache / w3.key)
+    load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
+    assert not dead.exists() and (cache / w3.key / "meta.json").exists()
+    # A live process preparing the same key is waited for (here: one that exits after a second).
+    import subprocess
+    import sys
+    import time as _time
+
+    monkeypatch.setattr(D, "PREPARE_POLL_S", 0.1)
+    shutil.rmtree(cache / w3.key)
+    import threading
+
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
+    reaper = threading.Thread(target=other.wait)  # reaped when it exits, as a non-child would be
+    reaper.start()
+    (cache / f".{w3.key}.tmp-{D.boot_id()}-{other.pid}").mkdir()
+    t0 = _time.monotonic()
+    try:
+        load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
+    finally:
+        reaper.join()
+    assert _time.monotonic() - t0 >= 0.9 and (cache / w3.key / "meta.json").exists()
+    (tmp_path / "old.npz").write_bytes(b"x")
+    with pytest.raises(ValueError, match="older version"):
+        load_windows(cfg, tmp_path / "demos", tmp_path / "old.npz")
     with pytest.raises(FileNotFoundError, match="demos render"):
         ds.rendered(0, "rgb+tactile").unlink()
         load_windows(cfg, tmp_path / "demos", None)
@@ -217,12 +255,12 @@ def test_training_reads_the_rendering_at_the_policys_camera_size_and_evaluation_
     assert load_policy(str(T.train(cfg, root, tmp_path / "native", progress=False))).camera_size is None
 
     ds = _write_demos(root, camera_size=(16, 16))
-    sized = load_windows(cfg, root, tmp_path / "cache.npz")
+    sized = load_windows(cfg, root, tmp_path / "cache")
     assert sized.camera_render_size == (16, 16)
     with h5py.File(ds.rendered(0, "rgb+tactile", (16, 16)), "r") as f:
         stored = f["traj_0/obs/sensor_data/base_camera/rgb"][()]
     assert np.array_equal(sized.frames["base"][:len(stored)], stored)  # the pixels as rendered
-    assert load_windows(cfg, root, tmp_path / "cache.npz").camera_render_size == (16, 16)  # from the cache
+    assert load_windows(cfg, root, tmp_path / "cache").camera_render_size == (16, 16)  # from the cache
     path = T.train(cfg, root, tmp_path / "sized", progress=False)
     assert torch.load(path, weights_only=False)["camera_render_size"] == [16, 16]
     assert load_policy(str(path)).camera_size == (16, 16)
@@ -283,6 +321,9 @@ def test_training_resumes_bit_for_bit(tmp_path):
     cb = torch.load(tmp_path / "b" / T.CHECKPOINT, weights_only=False)
     assert ca["losses"] == cb["losses"] and len(ca["losses"]) == cfg.steps
     assert (tmp_path / "a" / "loss.png").stat().st_size > 0
+    mtime = straight.stat().st_mtime_ns
+    assert T.train(cfg, tmp_path / "demos", tmp_path / "a", progress=False) == straight
+    assert straight.stat().st_mtime_ns == mtime  # a finished run is left as it is
     # Another configuration in the same directory is refused, naming the difference; so are
     # demonstrations rendered again since (other normalisers, other batches).
     with pytest.raises(ValueError, match="batch_size"):

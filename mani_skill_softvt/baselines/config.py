@@ -148,6 +148,19 @@ class DPConfig:
         return dataclasses.asdict(self)
 
 
+# The recipe search's recipes (baselines/search.py, train --recipe): each varies one thing of the
+# cpu preset (3,000 steps of batch 32 in bf16, 84 px cameras, ResNet widths 16-128, U-Net
+# 64-256, 5 % shift, two observation frames, 8 of 16 actions executed).
+RECIPES: dict[str, dict] = {
+    "base": {},
+    "long": {"steps": 12000},
+    "wide": {"steps": 12000, "encoder_widths": (32, 64, 128, 256), "unet_dims": (128, 256, 512)},
+    "img64": {"steps": 12000, "camera_size": (64, 64)},
+    "noaug": {"steps": 12000, "shift_fraction": 0.0},
+    "obs1": {"steps": 12000, "obs_horizon": 1},
+    "exec4": {"steps": 12000, "action_steps": 4},
+}
+
 # The appendix's settings (a GPU run; documented, not run here).
 _PAPER = dict(preset="paper", camera_size=(224, 224), tactile_size=(240, 320), encoder_widths=(64, 128, 256, 512),
               encoder_blocks=(2, 2, 2, 2), resnet_stem=True, image_feature_dim=512, unet_dims=(512, 1024, 2048), timestep_embed_dim=128,

@@ -15,15 +15,24 @@ A sample is the step ``t`` of an episode: the observations of steps ``t-1, t`` (
 repeats itself) and the actions ``t .. t+15`` (past the end, the last action repeats: the
 expert holds still). The variant picks the gripper column: continuous closure or binary.
 
-Preparing the arrays reads and resizes every image once (minutes for a few hundred demos); the
-result is cached beside the run (``data_cache.npz``, written atomically, keyed by the sources'
-sizes and modification times and the config's input fields), so a resumed run skips it.
+Preparing the arrays reads and resizes every image once (minutes for a few hundred demos, about
+7 GB for VO's 1,000). The result is cached in a directory (``<cache>/<key>/``: one ``.npy`` per
+array and ``meta.json``), keyed by the episodes read and the config's input fields, so a resumed
+run skips it and runs that read the same episodes the same way (recipes that differ only in the
+optimiser or the network) share one copy. The arrays are written in place through memory maps
+and read back memory-mapped: neither preparing nor training holds the frames in memory, and two
+runs on one cache share the page cache. A cache is written in a temporary directory renamed into
+place at the end; a process that finds another live one preparing the same key waits for it,
+and a temporary directory left by a process that died is removed.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import shutil
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +43,7 @@ from tqdm import tqdm
 from ..data.demo_set import DemoSet
 from ..data.trajectory import open_h5, tactile_model_of
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
-from ..fileio import atomic_write
+from ..fileio import atomic_write_json, read_json
 from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
 from .config import DPConfig
 from .features import frame_features
@@ -43,6 +52,8 @@ OBS_MODE = "rgb+tactile"
 # Config fields that change the prepared arrays (anything else, e.g. the optimiser, does not).
 INPUT_FIELDS = ("variant", "camera_size", "tactile_size", "tactile_inputs", "depth_scale_um", "suite", "tasks",
                 "demos_per_task", "heldout_per_task")
+CACHE_FORMAT = 2  # the directory of .npy files (1 was one .npz beside the run)
+PREPARE_POLL_S = 5.0  # how often a process waiting for another's preparation looks again
 
 
 @dataclass
@@ -145,56 +156,78 @@ def split_episodes(names: list[str], cfg: DPConfig, heldout: bool = False, where
     return names[n:n + h] if heldout else names[:n]
 
 
-def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> DemoWindows:
-    """Read the demonstrations into :class:`DemoWindows` (see the module docstring): the training
-    episodes, or with ``heldout`` the held-out ones (:func:`split_episodes`)."""
-    frames: dict[str, list[np.ndarray]] = {}
-    actions, obs_starts, act_starts = [], [0], [0]
-    render_sizes = set()
-    column = "actions_binary" if cfg.binary_gripper else "actions"
-    sources = _sources(cfg, demos_root)
-    with tqdm(total=len(sources), desc="prepare demos", unit="task") as bar:
-        for task, traj, rendered in sources:
-            with open_h5(traj) as ft, open_h5(rendered) as fr:
-                names = split_episodes(_episode_names(ft), cfg, heldout, where=traj)
-                for name in names:
-                    if name not in fr or "obs" not in fr[name]:
-                        raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
-                    if cfg.tactile and tactile_model_of(fr[name]) != TACTILE_MODEL_VERSION:
-                        raise ValueError(f"{rendered}:{name}: tactile frames of model {tactile_model_of(fr[name])}, this "
-                                         f"package renders model {TACTILE_MODEL_VERSION}; re-render with `python -m "
-                                         f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
-                    a = ft[name][column][()].astype(np.float32)
-                    obs = fr[name]["obs"]
-                    n = obs[TCP_POSE].shape[0]
-                    if n != len(a) + 1:
-                        raise ValueError(f"{rendered}:{name}: {n} frames for {len(a)} actions (expected one more); "
-                                         f"the rendering is stale: re-render task {task}")
-                    render_sizes |= {tuple(obs[camera_key(c)].shape[1:3]) for c in CAMERAS if camera_key(c) in obs}
-                    if len(render_sizes) > 1:
-                        raise ValueError(f"{rendered}:{name}: cameras rendered at {sorted(render_sizes)}; the demos a "
-                                         "policy learns from share one camera size: render every task at the same size")
-                    keys = [k for k in _needed_keys(cfg) if k in obs]
-                    data = {k: obs[k][()] for k in keys}
-                    for i in range(n):
-                        try:
-                            features = frame_features({k: data[k][i] for k in keys}, cfg)
-                        except (KeyError, ValueError) as e:
-                            raise ValueError(f"{rendered}:{name}: {e}; re-render task {task} with "
-                                             f"`python -m mani_skill_softvt.demos render --suite {cfg.suite} --tasks "
-                                             f"{task} --obs-mode {OBS_MODE}` (delete the file first)") from None
-                        for k, v in features.items():
-                            frames.setdefault(k, []).append(v)
-                    actions.append(a)
-                    obs_starts.append(obs_starts[-1] + n)
-                    act_starts.append(act_starts[-1] + len(a))
-            bar.update()
-    if not actions:
+def _plan_episodes(cfg: DPConfig, demos_root: Path, heldout: bool) -> tuple[list[tuple], tuple[int, int]]:
+    """The episodes to read, checked (observations present, tactile model, frame count, one camera
+    size), and the size their cameras were rendered at; reads only the files' metadata."""
+    episodes, render_sizes = [], set()
+    for task, traj, rendered in _sources(cfg, demos_root):
+        with open_h5(traj) as ft, open_h5(rendered) as fr:
+            for name in split_episodes(_episode_names(ft), cfg, heldout, where=traj):
+                if name not in fr or "obs" not in fr[name]:
+                    raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
+                if cfg.tactile and tactile_model_of(fr[name]) != TACTILE_MODEL_VERSION:
+                    raise ValueError(f"{rendered}:{name}: tactile frames of model {tactile_model_of(fr[name])}, this "
+                                     f"package renders model {TACTILE_MODEL_VERSION}; re-render with `python -m "
+                                     f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
+                obs = fr[name]["obs"]
+                n, steps = obs[TCP_POSE].shape[0], ft[name]["actions"].shape[0]
+                if n != steps + 1:
+                    raise ValueError(f"{rendered}:{name}: {n} frames for {steps} actions (expected one more); "
+                                     f"the rendering is stale: re-render task {task}")
+                render_sizes |= {tuple(int(v) for v in obs[camera_key(c)].shape[1:3]) for c in CAMERAS
+                                 if camera_key(c) in obs}
+                if len(render_sizes) > 1:
+                    raise ValueError(f"{rendered}:{name}: cameras rendered at {sorted(render_sizes)}; the demos a "
+                                     "policy learns from share one camera size: render every task at the same size")
+                episodes.append((task, traj, rendered, name, n, steps))
+    if not episodes:
         which = "held-out demonstrations (heldout_per_task)" if heldout else "demonstrations"
         raise ValueError(f"no {which} found for tasks {cfg.tasks} of {cfg.suite} under {demos_root}")
-    size = tuple(int(v) for v in render_sizes.pop()) if render_sizes else NATIVE_CAMERA_SIZE
-    return DemoWindows({k: np.stack(v) for k, v in frames.items()}, np.concatenate(actions),
-                       np.asarray(obs_starts), np.asarray(act_starts), cfg, camera_render_size=size)
+    return episodes, (render_sizes.pop() if render_sizes else NATIVE_CAMERA_SIZE)
+
+
+def _episode_features(cfg: DPConfig, task: int, rendered: Path, fr, name: str) -> list[dict[str, np.ndarray]]:
+    obs = fr[name]["obs"]
+    keys = [k for k in _needed_keys(cfg) if k in obs]
+    data = {k: obs[k][()] for k in keys}
+    try:
+        return [frame_features({k: data[k][i] for k in keys}, cfg) for i in range(obs[TCP_POSE].shape[0])]
+    except (KeyError, ValueError) as e:
+        raise ValueError(f"{rendered}:{name}: {e}; re-render task {task} with `python -m mani_skill_softvt.demos "
+                         f"render --suite {cfg.suite} --tasks {task} --obs-mode {OBS_MODE}` (delete the file first)") from None
+
+
+def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False, into: Path | None = None) -> DemoWindows:
+    """Read the demonstrations into :class:`DemoWindows` (see the module docstring): the training
+    episodes, or with ``heldout`` the held-out ones (:func:`split_episodes`). With ``into`` (a
+    directory that must not exist yet) the arrays are ``.npy`` files there, filled in place."""
+    episodes, size = _plan_episodes(cfg, demos_root, heldout)
+    frame_count, action_count = sum(e[4] for e in episodes), sum(e[5] for e in episodes)
+    obs_starts = np.concatenate([[0], np.cumsum([e[4] for e in episodes])])
+    act_starts = np.concatenate([[0], np.cumsum([e[5] for e in episodes])])
+    if into is not None:
+        Path(into).mkdir(parents=True)
+
+    def array(name: str, shape: tuple, dtype) -> np.ndarray:
+        if into is None:
+            return np.empty(shape, dtype)
+        return np.lib.format.open_memmap(Path(into) / f"{name}.npy", mode="w+", dtype=dtype, shape=shape)
+
+    frames: dict[str, np.ndarray] = {}
+    actions = array("actions", (action_count, cfg.action_dim), np.float32)
+    column = "actions_binary" if cfg.binary_gripper else "actions"
+    for i, (task, traj, rendered, name, n, steps) in enumerate(tqdm(episodes, desc="prepare demos", unit="demo")):
+        with open_h5(traj) as ft, open_h5(rendered) as fr:
+            actions[act_starts[i]:act_starts[i + 1]] = ft[name][column][()].astype(np.float32)
+            for j, features in enumerate(_episode_features(cfg, task, rendered, fr, name)):
+                for k, v in features.items():
+                    if k not in frames:
+                        frames[k] = array(f"frame_{k}", (frame_count, *v.shape), v.dtype)
+                    frames[k][obs_starts[i] + j] = v
+    for a in (actions, *frames.values()):
+        if isinstance(a, np.memmap):
+            a.flush()
+    return DemoWindows(frames, actions, obs_starts, act_starts, cfg, camera_render_size=size)
 
 
 def _needed_keys(cfg: DPConfig) -> list[str]:
@@ -202,25 +235,81 @@ def _needed_keys(cfg: DPConfig) -> list[str]:
     return keys + (tactile_keys() if cfg.tactile else [])
 
 
+def data_key(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> str:
+    """The cache key of the windows ``cfg`` reads from ``demos_root`` (:func:`cache_key`), without
+    reading them: what a resumed run compares with its checkpoint before preparing anything."""
+    return cache_key(cfg, _sources(cfg, demos_root), heldout)
+
+
+def boot_id() -> str:
+    """This machine's boot (Linux), so that a temporary directory left by a machine that since
+    restarted is not mistaken for one of a live process that got the same pid."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text().strip()[:8]
+    except OSError:
+        return "noboot"
+
+
+def _owner_alive(tmp: Path) -> bool:
+    """Whether the process that named the temporary directory ``tmp`` (``.<key>.tmp-<boot>-<pid>``) runs."""
+    boot, _, pid = tmp.name.rsplit(".tmp-", 1)[1].partition("-")
+    if boot != boot_id() or not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _read_cached(entry: Path, cfg: DPConfig, key: str) -> DemoWindows | None:
+    """The memory-mapped windows of a finished cache directory, None if it is not one of ``key``."""
+    try:
+        meta = read_json(entry / "meta.json")
+    except (FileNotFoundError, ValueError):
+        return None
+    if meta.get("key") != key or meta.get("format") != CACHE_FORMAT:
+        return None
+    load = lambda name: np.load(entry / f"{name}.npy", mmap_mode="r", allow_pickle=False)  # noqa: E731
+    frames = {k: load(f"frame_{k}") for k in meta["frames"]}
+    return DemoWindows(frames, load("actions"), np.asarray(meta["obs_starts"]), np.asarray(meta["act_starts"]), cfg,
+                       key, tuple(meta["camera_render_size"]))
+
+
 def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: bool = False) -> DemoWindows:
-    """:func:`prepare`, through the cache file ``cache`` when given (rebuilt if its key differs)."""
-    key = cache_key(cfg, _sources(cfg, demos_root), heldout)
-    if cache is not None and cache.exists():
-        with np.load(cache, allow_pickle=False) as z:
-            if str(z["key"]) == key and "camera_render_size" in z.files:
-                frames = {k[len("frame/"):]: z[k] for k in z.files if k.startswith("frame/")}
-                return DemoWindows(frames, z["actions"], z["obs_starts"], z["act_starts"], cfg, key,
-                                   tuple(int(v) for v in z["camera_render_size"]))
-    windows = prepare(cfg, demos_root, heldout)
-    windows.key = key
-    if cache is not None:
-        arrays = {f"frame/{k}": v for k, v in windows.frames.items()}
-
-        def save(tmp: Path):
-            with tmp.open("wb") as fh:
-                np.savez(fh, key=key, actions=windows.actions, obs_starts=windows.obs_starts,
-                         act_starts=windows.act_starts, camera_render_size=np.asarray(windows.camera_render_size),
-                         **arrays)
-
-        atomic_write(cache, save)
-    return windows
+    """:func:`prepare`, through the cache directory ``cache`` when given (see the module docstring):
+    the entry of this key if there is one, else prepared into it."""
+    key = data_key(cfg, demos_root, heldout)
+    if cache is None:
+        windows = prepare(cfg, demos_root, heldout)
+        windows.key = key
+        return windows
+    cache = Path(cache)
+    if cache.is_file():
+        raise ValueError(f"{cache} is a file (a data cache of an older version of this package, one .npz): delete "
+                         "it; the cache is now a directory of that name")
+    entry = cache / key
+    while True:
+        found = _read_cached(entry, cfg, key)
+        if found is not None:
+            return found
+        others = [p for p in cache.glob(f".{key}.tmp-*") if p.is_dir()]
+        live = [p for p in others if _owner_alive(p)]
+        for p in set(others) - set(live):  # left by a process that died while preparing
+            shutil.rmtree(p, ignore_errors=True)
+        if not live:
+            break
+        time.sleep(PREPARE_POLL_S)  # another process is preparing the same arrays: use its result
+    if entry.exists():  # an unfinished or foreign directory under this key's name
+        shutil.rmtree(entry)
+    tmp = cache / f".{key}.tmp-{boot_id()}-{os.getpid()}"
+    windows = prepare(cfg, demos_root, heldout, into=tmp)
+    atomic_write_json(tmp / "meta.json", {
+        "format": CACHE_FORMAT, "key": key, "heldout": heldout, "frames": sorted(windows.frames),
+        "obs_starts": windows.obs_starts.tolist(), "act_starts": windows.act_starts.tolist(),
+        "camera_render_size": list(windows.camera_render_size), "episodes": windows.episodes,
+        "inputs": {k: getattr(cfg, k) for k in INPUT_FIELDS}})
+    os.replace(tmp, entry)
+    return _read_cached(entry, cfg, key)

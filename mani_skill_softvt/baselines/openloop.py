@@ -84,16 +84,18 @@ def run_dir_of(policy_path: Path) -> Path:
     return parent.parent if parent.name == "snapshots" else parent
 
 
-def load_run_windows(cfg, run: Path, demos_root: Path) -> tuple[DemoWindows, DemoWindows]:
-    """The held-out and training windows of the run in ``run`` (through its caches)."""
+def load_run_windows(cfg, run: Path, demos_root: Path, cache: Path | None = None) -> tuple[DemoWindows, DemoWindows]:
+    """The held-out and training windows of the run in ``run``, through the data cache ``cache``
+    (default: the run's own, ``<run>/data_cache``)."""
     from .train import CACHE
 
-    return (load_windows(cfg, demos_root, run / "heldout_cache.npz", heldout=True),
-            load_windows(cfg, demos_root, run / CACHE))
+    cache = Path(run) / CACHE if cache is None else cache
+    return load_windows(cfg, demos_root, cache, heldout=True), load_windows(cfg, demos_root, cache)
 
 
 def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, threads: int = 2,
-             progress: bool = True, write: bool = True, windows: tuple[DemoWindows, DemoWindows] | None = None) -> dict:
+             progress: bool = True, write: bool = True, windows: tuple[DemoWindows, DemoWindows] | None = None,
+             cache: Path | None = None) -> dict:
     """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
     docstring); ``write`` puts them in ``openloop.json`` beside it. ``windows``: the run's
     (held-out, training) windows when the caller has them (several snapshots of one run)."""
@@ -105,7 +107,7 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
         raise ValueError(f"{policy_path} was trained on every demo (heldout_per_task=0): nothing is held out. Train "
                          "with `--set heldout_per_task=10` (the last 10 demos of each task are then never trained on)")
     torch.set_num_threads(threads)
-    heldout, training = windows or load_run_windows(cfg, run_dir_of(policy_path), demos_root)
+    heldout, training = windows or load_run_windows(cfg, run_dir_of(policy_path), demos_root, cache)
     if ckpt.get("data_key") not in (None, training.key):
         raise ValueError(f"{policy_path} was trained on other demos than {demos_root} now holds (its episodes "
                          "changed): the held-out ones might have been trained on. Measure it on the demos it was "
@@ -140,9 +142,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
     ap.add_argument("--windows", type=int, default=500, help="at most this many replanning steps per set")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--cache", type=Path, default=None, help="the run's data cache, if not <run>/data_cache")
     args = ap.parse_args(argv)
     try:
-        result = openloop(args.policy, args.demos, args.windows, args.threads)
+        result = openloop(args.policy, args.demos, args.windows, args.threads, cache=args.cache)
     except (FileNotFoundError, ValueError) as e:
         ap.error(str(e))
     print(format_openloop(result))

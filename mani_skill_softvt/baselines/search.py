@@ -24,19 +24,8 @@ from pathlib import Path
 
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import DEMOS_DIR, REPO_DIR
-from .config import VARIANTS, make_config
+from .config import RECIPES, VARIANTS, make_config
 
-# Each varies one thing of the cpu preset (3,000 steps of batch 32, 84 px cameras, ResNet widths
-# 16-128, U-Net 64-256, 5 % shift, two observation frames, 8 of 16 actions executed).
-RECIPES: dict[str, dict] = {
-    "base": {},
-    "long": {"steps": 12000},
-    "wide": {"steps": 12000, "encoder_widths": (32, 64, 128, 256), "unet_dims": (128, 256, 512)},
-    "img64": {"steps": 12000, "camera_size": (64, 64)},
-    "noaug": {"steps": 12000, "shift_fraction": 0.0},
-    "obs1": {"steps": 12000, "obs_horizon": 1},
-    "exec4": {"steps": 12000, "action_steps": 4},
-}
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
 RUNS_DIR = Path(os.environ.get("SOFTVT_RUNS_DIR", REPO_DIR / "outputs" / "recipe_search"))

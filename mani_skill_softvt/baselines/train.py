@@ -3,8 +3,12 @@
     python -m mani_skill_softvt.baselines.train --variant vt-c                    # cpu preset, Object-Soft
     python -m mani_skill_softvt.baselines.train --variant vo-c --config paper     # the appendix's recipe (GPU)
     python -m mani_skill_softvt.baselines.train --variant vo-b --set steps=500 batch_size=16
+    python -m mani_skill_softvt.baselines.train --variant vo-c --recipe long --budget-min 150 --cache /data/cache
 
-Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (docs/baselines.md). Writes under ``--out`` (default ``outputs/baselines/<suite>/<variant>-<config>``):
+Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (docs/baselines.md).
+``--recipe`` applies one of the named recipes (:data:`~.config.RECIPES`) before ``--set``;
+``--budget-min`` stops at the first checkpoint after that many minutes (run the same command again
+to continue). Writes under ``--out`` (default ``outputs/baselines/<suite>/<variant>-<config>[-<recipe>]``):
 
 - ``checkpoint.pt``: everything to resume (weights, EMA, optimiser, schedule, random state,
   losses), rewritten atomically every ``checkpoint_every`` steps; re-running the same command
@@ -12,7 +16,8 @@ Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (
 - ``policy.pt``: the EMA weights and the config, what ``evaluate --policy <path>`` loads;
 - with ``--snapshot-every N``, ``snapshots/<run>_step<k>.pt``: the same at every N-th step (a
   policy each, for curves of error or TSR against training time);
-- ``loss.png``: the training loss; ``data_cache.npz``: the prepared demonstrations.
+- ``loss.png``: the training loss; ``data_cache/``: the prepared demonstrations (:mod:`.dataset`),
+  unless ``--cache`` names a directory shared between runs.
 """
 
 from __future__ import annotations
@@ -29,15 +34,16 @@ from tqdm import tqdm
 from ..fileio import atomic_write
 from ..paths import DEMOS_DIR, REPO_DIR
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
-from .config import PRESETS, VARIANTS, DPConfig, make_config, parse_override
-from .dataset import DemoWindows, load_windows
+from .config import PRESETS, RECIPES, VARIANTS, DPConfig, make_config, parse_override
+from .dataset import DemoWindows, data_key, load_windows
 from .model import DiffusionPolicyModel, noise_scheduler
 
-CHECKPOINT, POLICY, CACHE = "checkpoint.pt", "policy.pt", "data_cache.npz"
+CHECKPOINT, POLICY, CACHE = "checkpoint.pt", "policy.pt", "data_cache"
 
 
-def default_out(cfg: DPConfig) -> Path:
-    return REPO_DIR / "outputs" / "baselines" / cfg.suite / f"{cfg.variant}-{cfg.preset}"
+def default_out(cfg: DPConfig, recipe: str | None = None) -> Path:
+    name = f"{cfg.variant}-{cfg.preset}" + (f"-{recipe}" if recipe and recipe != "base" else "")
+    return REPO_DIR / "outputs" / "baselines" / cfg.suite / name
 
 
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:
@@ -216,19 +222,23 @@ def snapshot_path(out: Path, step: int) -> Path:
 
 
 def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = None, progress: bool = True,
-          deadline: float | None = None, snapshot_every: int | None = None) -> Path:
+          deadline: float | None = None, snapshot_every: int | None = None, cache: Path | None = None) -> Path:
     """Train (or resume) the run in ``out``; returns the path of ``policy.pt``. ``stop_after``
     ends this call after that many optimiser steps, ``deadline`` (``time.monotonic()``) at the
     first checkpoint after it (the run resumes later, the same as an uninterrupted one).
-    ``snapshot_every`` keeps a snapshot policy every that many steps (:func:`snapshot_path`)."""
+    ``snapshot_every`` keeps a snapshot policy every that many steps (:func:`snapshot_path`).
+    ``cache``: the prepared-data directory (default ``out/data_cache``; runs may share one)."""
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
     out = Path(out)
-    ckpt_path = out / CHECKPOINT
+    ckpt_path, policy_path = out / CHECKPOINT, out / POLICY
     ckpt = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
     if ckpt is not None:
-        check_same_run(ckpt, cfg, ckpt_path)
-    windows = load_windows(cfg, demos_root, out / CACHE)
+        # Everything that can be refused is refused before minutes of preparing data.
+        check_same_run(ckpt, cfg, ckpt_path, data_key(cfg, demos_root))
+        if ckpt["step"] == ckpt["steps"] and policy_path.exists():
+            return policy_path  # finished: nothing to do, and policy.pt is not written again
+    windows = load_windows(cfg, demos_root, out / CACHE if cache is None else cache)
     steps = total_steps(cfg, len(windows))
     if ckpt is not None:
         check_same_run(ckpt, cfg, ckpt_path, windows.key, steps)
@@ -249,7 +259,6 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
                 save(ckpt_path, run.state(windows.key))
                 if deadline is not None and time.monotonic() >= deadline:
                     break
-    policy_path = out / POLICY
     if run.step == steps:
         save(policy_path, run.policy_file(windows))
         plot_losses(run.losses, out / "loss.png", f"{cfg.variant} ({cfg.preset}), {windows.episodes} demos")
@@ -260,18 +269,24 @@ def main(argv=None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", required=True, choices=VARIANTS)
     ap.add_argument("--config", default="cpu", choices=PRESETS, help="the appendix's recipe (paper) or the 2-core one")
+    ap.add_argument("--recipe", default=None, choices=sorted(RECIPES), help="a named recipe of the search (config.RECIPES)")
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields (DPConfig)")
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--cache", type=Path, default=None, help="prepared-data directory (default: OUT/data_cache)")
+    ap.add_argument("--budget-min", type=float, default=None,
+                    help="stop at the first checkpoint after this many minutes (run again to continue)")
     ap.add_argument("--snapshot-every", type=int, default=None, metavar="N",
                     help="also keep the policy of every N-th step (snapshots/), for curves against training time")
     args = ap.parse_args(argv)
     try:
-        cfg = make_config(args.variant, args.config, **dict(parse_override(s) for s in args.set))
+        recipe = RECIPES[args.recipe] if args.recipe else {}
+        cfg = make_config(args.variant, args.config, **{**recipe, **dict(parse_override(s) for s in args.set)})
     except ValueError as e:
         ap.error(str(e))
-    out = args.out or default_out(cfg)
-    path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every)
+    out = args.out or default_out(cfg, args.recipe)
+    deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
+    path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache)
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
     return path
 
