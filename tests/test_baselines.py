@@ -526,6 +526,35 @@ def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_the_recipe_search_scores_snapshots_in_closed_loop_and_resumes(tmp_path, monkeypatch):
+    from mani_skill_softvt.baselines import search
+
+    _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
+    monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
+    argv = ["--recipes", "tiny", "--heldout", "1", "--snapshot-every", "3", "--demos", str(tmp_path / "demos"),
+            "--runs", str(tmp_path / "runs"), "--results", str(tmp_path / "results"), "--set", "lr=0.001"]
+    search.main(argv)
+    run = tmp_path / "runs" / "vo-c" / "vo-c-tiny+lr=0.001"
+    assert [search.snapshot_step(p) for p in search.run_snapshots(run)] == [3, 6]
+    (run / "snapshots" / ".vo-c-tiny_step000009.pt").write_bytes(b"")  # a write in progress is no snapshot
+    assert [search.snapshot_step(p) for p in search.run_snapshots(run)] == [3, 6]
+    with pytest.raises(ValueError, match="no snapshots of steps \\[9\\]"):
+        search.evaluate_snapshots(run, 1, [9], 1, tmp_path / "results", tasks=[0])
+    summaries = search.evaluate_snapshots(run, 1, [6], 1, tmp_path / "results", tasks=[0])
+    (key, summary), = summaries.items()
+    assert key[1] == 6 and summary["episodes"] == 1 and sum(summary["terminations"].values()) == 1
+    assert 0 <= summary["dsr"] <= summary["tsr"] <= 1 and summary["tsr_ci95"][1] > 0.5  # one episode: a wide interval
+    records = list((tmp_path / "results" / "closed_loop").glob("*/object_soft_id_vo-c-tiny*_step000006.jsonl"))
+    assert len(records) == 1 and len(records[0].read_text().splitlines()) == 1
+    search.evaluate_snapshots(run, 1, [6], 1, tmp_path / "results", tasks=[0])  # resumes: nothing runs again
+    assert len(records[0].read_text().splitlines()) == 1
+    table = search.format_table("vo-c", tmp_path / "results")
+    row = next(line for line in table.splitlines() if line.startswith("| tiny+lr=0.001") and "| 6 |" in line)
+    assert row.count("%") == 2 and "| 1 |" in row
+    assert search.plot_curves("vo-c", tmp_path / "results").stat().st_size > 0
+
+
+@pytest.mark.slow
 def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     # End to end on the real env: the record names the variant and the modes it was resolved to.
     from mani_skill_softvt import evaluate

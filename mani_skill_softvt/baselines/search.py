@@ -2,17 +2,27 @@
 demos with held-out demos set aside, ranked by their held-out open-loop error.
 
     python -m mani_skill_softvt.baselines.search --variant vo-c --recipes base long --budget-min 120
+    python -m mani_skill_softvt.baselines.search --variant vo-c --recipes long --set batch_size=64
+    python -m mani_skill_softvt.baselines.search --variant vo-c --recipes long --closed-loop 10 --steps 6000 12000
     python -m mani_skill_softvt.baselines.search --variant vo-c --table       # the results so far
 
 A recipe is a set of :class:`~mani_skill_softvt.baselines.config.DPConfig` overrides on the cpu
-preset (:data:`RECIPES`), always with ``heldout_per_task`` = ``--heldout`` (demos of each task
+preset (:data:`~.config.RECIPES`), plus any ``--set key=value`` (the run is then named
+``<variant>-<recipe>+key=value``), always with ``heldout_per_task`` = ``--heldout`` (demos of each task
 never trained on: those after ``--demos-per-task``, which stay the same as the set grows). Each run trains under ``--runs`` (outside the checkout: checkpoints and
 the prepared data are large), resuming where it stopped, until it ends or the time budget runs
 out; it keeps a snapshot policy every ``--snapshot-every`` steps. Every snapshot's open-loop
 error (:mod:`.openloop`) and training time become a line of ``baselines/search/<variant>.jsonl``
 (committed: the table survives the machine), so each recipe yields a curve of error against
-training time, and the closed-loop TSR of the chosen recipe's snapshots (``evaluate --policy
-<snapshot>``) its curve of TSR against training time.
+training time. The runs share one prepared-data cache (``<runs>/data_cache``): recipes that read
+the demos the same way read one copy.
+
+``--closed-loop N`` trains nothing: it evaluates the runs' snapshots (those of ``--steps``, default
+all) on the ID protocol, N episodes per task, with ``--workers`` processes, into
+``baselines/search/closed_loop/<run>/object_soft_id_<snapshot>.jsonl`` (committed, resumable:
+``evaluate``'s records). It can run beside a training run. The table then shows TSR and DSR with
+their Wilson intervals beside the open-loop error, and ``baselines/search/<variant>.png`` plots
+both against training time (the chosen recipe's curve of TSR against training time).
 """
 
 from __future__ import annotations
@@ -24,7 +34,7 @@ from pathlib import Path
 
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import DEMOS_DIR, REPO_DIR
-from .config import RECIPES, VARIANTS, make_config
+from .config import RECIPES, VARIANTS, make_config, parse_override
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
@@ -34,11 +44,24 @@ HELDOUT = 10  # demos per task set aside (the last ones), for every recipe alike
 SNAPSHOT_EVERY = 1500
 
 
-def recipe_config(variant: str, recipe: str, heldout: int = HELDOUT, **extra):
-    """The cpu preset of ``variant`` with the recipe's overrides and the held-out split."""
+def recipe_config(variant: str, recipe: str, heldout: int = HELDOUT, overrides: dict | None = None, **extra):
+    """The cpu preset of ``variant`` with the recipe's overrides, ``overrides`` (``--set``) and the
+    held-out split; ``extra`` (threads, demos per task) does not name the run."""
     if recipe not in RECIPES:
         raise ValueError(f"recipe {recipe!r}: choose one of {sorted(RECIPES)}")
-    return make_config(variant, "cpu", **{**RECIPES[recipe], "heldout_per_task": heldout, **extra})
+    return make_config(variant, "cpu", **{**RECIPES[recipe], **(overrides or {}), "heldout_per_task": heldout, **extra})
+
+
+def recipe_label(recipe: str, sets: list[str] = ()) -> str:
+    """A recipe with its ``--set`` overrides, as runs and results name it (``long+batch_size=64``)."""
+    return "+".join([recipe, *sets])
+
+
+def run_snapshots(run: Path) -> list[Path]:
+    """The finished snapshot policies of a run, by step (an atomic write's temporary file, a dot
+    file, is not one)."""
+    return sorted((p for p in (Path(run) / "snapshots").glob("*.pt") if not p.name.startswith(".")),
+                  key=snapshot_step)
 
 
 def results_path(variant: str, results_dir: Path = RESULTS_DIR) -> Path:
@@ -65,19 +88,19 @@ def snapshot_step(path: Path) -> int:
 
 
 def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Path, results_dir: Path, windows: int,
-                      threads: int) -> list[dict]:
+                      threads: int, cache: Path | None = None) -> list[dict]:
     """Log the open-loop error of every snapshot of the run of ``cfg`` in ``run`` not yet logged;
     the new lines. The run's data is read once for all its snapshots."""
     from .openloop import load_run_windows, openloop
     from .train import CHECKPOINT, load_checkpoint
 
     done = measured(variant, results_dir)
-    todo = sorted((run / "snapshots").glob("*.pt"), key=snapshot_step)
+    todo = run_snapshots(run)
     if not todo:
         return []
     identity = run_id(cfg, load_checkpoint(run / CHECKPOINT).get("data_key", ""))
     todo = [s for s in todo if (identity, snapshot_step(s)) not in done]
-    data = load_run_windows(cfg, run, demos_root) if todo else None
+    data = load_run_windows(cfg, run, demos_root, cache) if todo else None
     new = []
     for snap in todo:
         result = openloop(snap, demos_root, windows, threads, progress=False, write=False, windows=data)
@@ -90,18 +113,119 @@ def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Pat
     return new
 
 
+def closed_loop_dir(results_dir: Path, run: str) -> Path:
+    """Where the closed-loop records of run ``run`` (its :func:`run_id`) go."""
+    return Path(results_dir) / "closed_loop" / run
+
+
+def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, workers: int, results_dir: Path,
+                       suite: str = "object_soft", tasks: list[int] | None = None) -> dict[tuple[str, int], dict]:
+    """Evaluate the run's snapshots (of ``steps``, default all) on the ID protocol, ``per_task``
+    episodes of each of ``tasks`` (default all), resuming; the summaries of every evaluated
+    snapshot (:func:`closed_loop_summaries`)."""
+    from tqdm import tqdm
+
+    from ..evaluation.protocols import episodes
+    from ..evaluation.runner import evaluate
+    from .agent import read_policy_file, required_modes
+
+    snaps = [s for s in run_snapshots(run) if steps is None or snapshot_step(s) in steps]
+    missing = sorted(set(steps or ()) - {snapshot_step(s) for s in snaps})
+    if missing:
+        raise ValueError(f"{run}: no snapshots of steps {missing} (it has {[snapshot_step(s) for s in run_snapshots(run)]}); "
+                         "train further, or pick others with --steps")
+    eps = episodes(suite, "id", tasks, per_task)
+    for snap in snaps:
+        cfg, ckpt = read_policy_file(snap)
+        out = closed_loop_dir(results_dir, run_id(cfg, ckpt.get("data_key", ""))) / f"{suite}_id_{snap.stem}.jsonl"
+        obs_mode, control_mode = required_modes(snap)
+        with tqdm(total=len(eps), desc=f"closed loop {snap.stem}", unit="episode") as bar:
+            evaluate(eps, str(snap.resolve()), out, workers, obs_mode, control_mode, progress=bar.update)
+    return closed_loop_summaries(results_dir)
+
+
+def closed_loop_summaries(results_dir: Path = RESULTS_DIR) -> dict[tuple[str, int], dict]:
+    """TSR and DSR (with Wilson intervals) of every evaluated snapshot, by (run, step); an episode
+    evaluated twice (the snapshot file moved, so another policy path) counts once, its last record."""
+    from ..evaluation.metrics import summarize
+    from ..evaluation.protocols import episode_key
+    from ..evaluation.runner import read_records
+
+    out = {}
+    for path in sorted(Path(results_dir).glob("closed_loop/*/*.jsonl")):
+        records = list({episode_key(r): r for r in read_records(path)}.values())
+        if records:
+            summary = summarize(records)
+            summary["per_task"] = len(records) // len({r["task_id"] for r in records})
+            out[(path.parent.name, snapshot_step(path.with_suffix(".pt")))] = summary
+    return out
+
+
+def _pct_ci(s: dict, key: str) -> str:
+    lo, hi = s[f"{key}_ci95"]
+    return f"{100 * s[key]:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+
 def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
-    """The logged results, one row per (recipe, step), by recipe then step."""
+    """The logged results, one row per (recipe, step), by recipe then step; closed-loop TSR and
+    DSR (95 % Wilson intervals) where the snapshot was evaluated."""
     rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["run"], r["step"]))
+    closed = closed_loop_summaries(results_dir)
     head = ("| recipe (run) | demos trained / held out | step | training min | held-out pos mm | 1st action mm | rot deg "
-            "| gripper | training pos mm |\n|---|---|---|---|---|---|---|---|---|")
-    lines = [f"{variant}: open-loop error of the executed actions at every replanning step", "", head]
+            "| gripper | training pos mm | closed-loop episodes | TSR | DSR |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+    lines = [f"{variant}: open-loop error of the executed actions at every replanning step; closed-loop TSR and DSR "
+             "on the ID protocol", "", head]
     for r in rows:
         h, t = r["heldout"], r["training"]
+        c = closed.get((r["run"], r["step"]))
+        loop = f"{c['episodes']} | {_pct_ci(c, 'tsr')} | {_pct_ci(c, 'dsr')}" if c else " | | "
         lines.append(f"| {r['recipe']} ({r['run'][:6]}) | {r['episodes_trained']} / {r['episodes_heldout']} | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
                      f"{h['position_mm_first_action']:.1f} | {h['rotation_deg_mean']:.2f} | {h['gripper_mean']:.3f} | "
-                     f"{t['position_mm_mean']:.1f} |")
+                     f"{t['position_mm_mean']:.1f} | {loop} |")
     return "\n".join(lines)
+
+
+def plot_curves(variant: str, results_dir: Path = RESULTS_DIR) -> Path | None:
+    """``<results>/<variant>.png``: held-out open-loop error and closed-loop TSR against training
+    time, one line per run; None when nothing is logged."""
+    rows = list(measured(variant, results_dir).values())
+    if not rows:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..fileio import atomic_write
+
+    closed = closed_loop_summaries(results_dir)
+    fig, (ax_err, ax_tsr) = plt.subplots(1, 2, figsize=(11, 4))
+    for run in sorted({r["run"] for r in rows}):
+        mine = sorted((r for r in rows if r["run"] == run), key=lambda r: r["step"])
+        label = f"{mine[0]['recipe']} ({run[:6]})"
+        minutes = [r["train_wall_s"] / 60 for r in mine]
+        ax_err.plot(minutes, [r["heldout"]["position_mm_mean"] for r in mine], "o-", label=label)
+        loop = [(m, closed[(run, r["step"])]) for m, r in zip(minutes, mine) if (run, r["step"]) in closed]
+        if loop:
+            x = [m for m, _ in loop]
+            tsr = [100 * c["tsr"] for _, c in loop]
+            lo = [100 * c["tsr_ci95"][0] for _, c in loop]
+            hi = [100 * c["tsr_ci95"][1] for _, c in loop]
+            ax_tsr.errorbar(x, tsr, yerr=[[a - b for a, b in zip(tsr, lo)], [b - a for a, b in zip(tsr, hi)]],
+                            fmt="o-", capsize=3, label=label)
+    ax_err.set(xlabel="training time (min, one core)", ylabel="held-out TCP position error (mm)",
+               title=f"{variant}: open loop")
+    ax_tsr.set(xlabel="training time (min, one core)", ylabel="TSR (%), 95 % Wilson interval", ylim=(0, 100),
+               title=f"{variant}: closed loop, ID protocol")
+    for ax in (ax_err, ax_tsr):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    path = Path(results_dir) / f"{variant}.png"
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+    plt.close(fig)
+    return path
 
 
 def main(argv=None) -> str:
@@ -111,6 +235,8 @@ def main(argv=None) -> str:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", default="vo-c", choices=VARIANTS)
     ap.add_argument("--recipes", nargs="+", default=["base"], help=f"of {sorted(RECIPES)}, trained in this order")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="overrides on top of every recipe (the runs are named <variant>-<recipe>+KEY=VALUE)")
     ap.add_argument("--budget-min", type=float, default=None, help="stop training after this many minutes (resumable)")
     ap.add_argument("--heldout", type=int, default=HELDOUT,
                     help="demos per task set aside: the ones after --demos-per-task (else the last ones)")
@@ -118,6 +244,10 @@ def main(argv=None) -> str:
     ap.add_argument("--snapshot-every", type=int, default=SNAPSHOT_EVERY)
     ap.add_argument("--windows", type=int, default=500, help="replanning steps measured per set and snapshot")
     ap.add_argument("--threads", type=int, default=1, help="torch threads for training and measuring")
+    ap.add_argument("--closed-loop", type=int, default=None, metavar="N",
+                    help="train nothing: evaluate the recipes' snapshots on the ID protocol, N episodes per task")
+    ap.add_argument("--steps", type=int, nargs="+", default=None, help="with --closed-loop: these snapshots only")
+    ap.add_argument("--workers", type=int, default=1, help="with --closed-loop: evaluation processes")
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR)
     ap.add_argument("--runs", type=Path, default=RUNS_DIR, help="run directories (checkpoints, prepared data)")
     ap.add_argument("--results", type=Path, default=RESULTS_DIR, help="where the results table is logged")
@@ -125,26 +255,49 @@ def main(argv=None) -> str:
     args = ap.parse_args(argv)
     if args.table:
         table = format_table(args.variant, args.results)
+        plot_curves(args.variant, args.results)
         print(table)
         return table
     unknown = sorted(set(args.recipes) - set(RECIPES))
     if unknown:
         ap.error(f"unknown recipes {unknown}; the recipes are {sorted(RECIPES)}")
+    try:  # every run's config is checked before the first one trains for hours
+        overrides = dict(parse_override(s) for s in args.set)
+        configs = {r: recipe_config(args.variant, r, args.heldout, overrides, threads=args.threads,
+                                    demos_per_task=args.demos_per_task) for r in args.recipes}
+    except ValueError as e:
+        ap.error(str(e))
+    runs = {r: args.runs / args.variant / f"{args.variant}-{recipe_label(r, args.set)}" for r in args.recipes}
+    if args.closed_loop is not None:
+        if args.closed_loop < 1 or args.workers < 1:
+            ap.error("--closed-loop and --workers must be >= 1")
+        for recipe in args.recipes:
+            try:
+                evaluate_snapshots(runs[recipe], args.closed_loop, args.steps, args.workers, args.results)
+            except (FileNotFoundError, ValueError) as e:
+                ap.error(str(e))
+        table = format_table(args.variant, args.results)
+        plot_curves(args.variant, args.results)
+        print(table)
+        return table
+    cache = args.runs / "data_cache"  # shared: recipes that read the demos alike read one copy
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
     for recipe in args.recipes:
         if deadline is not None and time.monotonic() >= deadline:
             print(f"the time budget ran out before {recipe}; run the same command again to continue")
             break
-        cfg = recipe_config(args.variant, recipe, args.heldout, threads=args.threads, demos_per_task=args.demos_per_task)
-        run = args.runs / args.variant / f"{args.variant}-{recipe}"  # its records and snapshots say both
-        policy = train(cfg, args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every)
-        for line in measure_snapshots(args.variant, recipe, run, cfg, args.demos, args.results, args.windows, args.threads):
-            print(f"{recipe} step {line['step']}: held-out {line['heldout']['position_mm_mean']:.1f} mm, "
+        label, run = recipe_label(recipe, args.set), runs[recipe]  # its records and snapshots say both
+        policy = train(configs[recipe], args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every,
+                       cache=cache)
+        for line in measure_snapshots(args.variant, label, run, configs[recipe], args.demos, args.results, args.windows,
+                                      args.threads, cache):
+            print(f"{label} step {line['step']}: held-out {line['heldout']['position_mm_mean']:.1f} mm, "
                   f"training {line['training']['position_mm_mean']:.1f} mm")
         if not policy.exists():
-            print(f"{recipe}: the time budget ran out; run the same command again to continue")
+            print(f"{label}: the time budget ran out; run the same command again to continue")
             break
     table = format_table(args.variant, args.results)
+    plot_curves(args.variant, args.results)
     print(table)
     return table
 
