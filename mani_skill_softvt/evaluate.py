@@ -5,16 +5,21 @@
         --obs-mode rgb+tactile --tasks all --episodes-per-task 50 --workers 2
     python -m mani_skill_softvt.evaluate --tasks all --episodes-per-task 50 --ray ray://head:10001   # on Ray
     python -m mani_skill_softvt.evaluate --rescore outputs/eval/object_soft_id_expert.jsonl --percentile 80
+    python -m mani_skill_softvt.evaluate --reproduce baselines/results/object_soft_id_vo-c-cpu.jsonl
 
 Writes one JSONL record per episode (resumable), a markdown and JSON report, and plots of the
 R_t traces (and, for OOD, TSR/DSR per factor). ``--rescore`` re-aggregates stored records at
-another calibration percentile using the cards' sweep records: no new rollouts.
+another calibration percentile using the cards' sweep records: no new rollouts. ``--reproduce``
+runs recorded episodes again (the first ``--episodes-per-task`` of each task, default 1) with the
+configuration they were recorded with and compares the new records with the stored ones, field by
+field (all but the wall time): exit status 0 if they are the same, 1 naming the fields that differ.
+A record of a trained policy file carries the file's SHA-256; another file under that name is
+refused before anything runs.
 """
 
 from __future__ import annotations
 
 import argparse
-import re
 from pathlib import Path
 
 from .tasks.suites import NUM_TASKS, SUITES
@@ -33,7 +38,7 @@ def main(argv=None) -> dict:
                          "needs --obs-mode rgb or rgb+tactile) | PATH/policy.pt (a trained Diffusion Policy "
                          "baseline, mani_skill_softvt.baselines.train)")
     ap.add_argument("--tasks", nargs="+", default=[str(t) for t in DEFAULT_TASKS], help="task ids, or 'all'")
-    ap.add_argument("--episodes-per-task", type=int, default=1)
+    ap.add_argument("--episodes-per-task", type=int, default=None, help="default 1")
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
                     help="default: state_dict, or what a trained baseline (policy.pt) was trained on")
@@ -48,6 +53,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=Path("outputs/eval"))
     ap.add_argument("--rescore", type=Path, default=None, help="records (JSONL) to re-aggregate at --percentile")
     ap.add_argument("--percentile", type=float, default=None)
+    ap.add_argument("--reproduce", type=Path, default=None, metavar="RECORDS",
+                    help="run recorded episodes again and compare (see above); exit status 1 if they differ")
     ap.add_argument("--video", type=int, default=0, metavar="N",
                     help="re-run the first N episodes in rgb+tactile mode and write <out>/videos/*.mp4")
     args = ap.parse_args(argv)
@@ -56,6 +63,9 @@ def main(argv=None) -> dict:
 
     if args.rescore is not None:
         return _rescore(args.rescore, args.percentile, args.out)
+    if args.reproduce is not None:
+        return _reproduce(ap, args.reproduce, args.episodes_per_task or 1, args.workers)
+    args.episodes_per_task = 1 if args.episodes_per_task is None else args.episodes_per_task
     _resolve_modes(ap, args)
     from .observations import parse_image_size
 
@@ -78,18 +88,12 @@ def main(argv=None) -> dict:
     from tqdm import tqdm
 
     from .evaluation.protocols import episodes
-    from .evaluation.runner import evaluate
+    from .evaluation.runner import evaluate, records_stem
 
     if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
         print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
     eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
-    # A file name, also for ws://host:port; a trained baseline is named by its run directory
-    # (vo-c-cpu), a snapshot by its file (vo-c-cpu_step003000).
-    tag_source = args.policy
-    if args.policy.endswith(".pt"):
-        tag_source = Path(args.policy).parent.name if Path(args.policy).name == "policy.pt" else Path(args.policy).stem
-    policy_tag = re.sub(r"[^A-Za-z0-9-]+", "_", tag_source).strip("_")
-    stem = f"{args.suite}_{args.protocol}_{policy_tag}"
+    stem = records_stem(args.suite, args.protocol, args.policy)
     bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
     try:
         records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
@@ -107,7 +111,7 @@ def main(argv=None) -> dict:
 
         from .evaluation.runner import run_records
 
-        id_file = args.out / f"{args.suite}_id_{policy_tag}.jsonl"
+        id_file = args.out / f"{records_stem(args.suite, 'id', args.policy)}.jsonl"
         from .evaluation.policies import policy_camera_size
 
         size = args.camera_size or policy_camera_size(args.policy)
@@ -138,6 +142,29 @@ def _resolve_modes(ap: argparse.ArgumentParser, args) -> None:
                 ap.error(f"{args.policy} was trained for {flag} {need}; evaluate it with {flag} {need} (or leave the flag out)")
     args.obs_mode = args.obs_mode or need_obs
     args.control_mode = args.control_mode or need_control
+
+
+def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: int) -> dict:
+    from tqdm import tqdm
+
+    from .evaluation.runner import RecordIntegrityError, reproduce
+
+    if not Path(path).is_file():
+        ap.error(f"--reproduce: {path} does not exist")
+    bar = tqdm(desc=f"reproduce {Path(path).name}", unit="episode")
+    try:
+        results = reproduce(path, per_task, workers, progress=bar.update)
+    except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
+        ap.error(str(e))
+    bar.close()
+    differing = [(r, fields) for r, fields in results if fields]
+    for r, fields in results:
+        where = f"{r['suite']} task {r['task_id']} {r['condition']} seed {r['seed']}"
+        print(f"{where}: {'differs in ' + ', '.join(fields) if fields else 'the same, bit for bit'}")
+    print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
+    if differing:
+        raise SystemExit(1)
+    return {"reproduced": len(results)}
 
 
 def _rescore(path: Path, percentile: float | None, out: Path) -> dict:

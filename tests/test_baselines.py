@@ -138,7 +138,7 @@ def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
         x, t = torch.randn(3, 16, 7, generator=g), torch.tensor([0, 7, 19])
         e32, e16 = m32.denoise(x, t, c32), m16.denoise(x, t, c32)
     assert c16.dtype == e16.dtype == torch.float32
-    rel = lambda a, b: float((a - b).norm() / b.norm())  # noqa: E731
+    rel = lambda a, b: float((a - b).norm() / b.norm())
     assert 0 < rel(c16, c32) < 0.03 and 0 < rel(e16, e32) < 0.03
     nchw = ImageEncoder(3, (4, 8), (1, 1), 8)
     nhwc = ImageEncoder(3, (4, 8), (1, 1), 8, channels_last=True)
@@ -567,6 +567,9 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     assert rec["receipt"]["policy"] == "diffusion_policy[vt-c,cpu,rgb+depth]" and not rec["receipt"]["privileged"]
     assert (rec["obs_mode"], rec["control_mode"]) == ("rgb+tactile", "pd_ee_pose")
     assert rec["termination"] in ("timeout", "dropped", "success") and rec["error"] is None
+    from mani_skill_softvt.evaluation.runner import policy_file_sha256
+
+    assert rec["policy_sha256"] == policy_file_sha256(str(path))  # the record pins the weights it scored
 
 
 def test_results_table_puts_each_variant_beside_the_paper(tmp_path):

@@ -36,3 +36,44 @@ def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube
         assert receipt["privileged"] and receipt["light_intensity"] == pytest.approx(135.0)
         assert len(r["deformation_trace"]) == r["steps"] + 1  # reset + every step
     json.dumps(full)  # records are plain JSON
+
+
+def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, soft_cube_expert_run, capsys):
+    # The expert's episode run again gives the stored record bit for bit (all but the wall time);
+    # a stored record that says another R_max (resealed, so it passes the audit) is named by field.
+    from mani_skill_softvt import evaluate as evaluate_cli
+
+    _, full, _ = soft_cube_expert_run
+    edited = dict(full[0], r_max=full[0]["r_max"] + 0.5)
+    edited["record_sha256"] = record_hash(edited)
+    path = tmp_path / "object_soft_id_expert.jsonl"
+    path.write_text(json.dumps(edited) + "\n")
+    with pytest.raises(SystemExit) as stop:
+        evaluate_cli.main(["--reproduce", str(path)])
+    assert stop.value.code == 1
+    out = capsys.readouterr().out
+    assert "task 3 id" in out and "differs in r_max\n" in out and "0 of 1 episodes" in out
+
+
+def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
+    from mani_skill_softvt.evaluation.runner import (
+        policy_file_sha256,
+        policy_tag,
+        records_stem,
+        reproduce,
+    )
+
+    policy = tmp_path / "vo-c.pt"
+    policy.write_bytes(b"the weights the records were made with")
+    rec = {"suite": "object_soft", "task_id": 0, "condition": "id", "seed": 1, "policy": str(policy),
+           "obs_mode": "rgb", "control_mode": "pd_ee_pose", "camera_size": [84, 84],
+           "policy_sha256": policy_file_sha256(str(policy))}
+    rec["record_sha256"] = record_hash(rec)
+    path = tmp_path / "records.jsonl"
+    path.write_text(json.dumps(rec) + "\n")
+    policy.write_bytes(b"retrained")
+    with pytest.raises(ValueError, match="not the policy file these records were made with"):
+        reproduce(path)
+    assert policy_file_sha256("expert") is None
+    assert policy_tag("runs/vo-c-cpu/policy.pt") == "vo-c-cpu" and policy_tag("ws://gpu:8000") == "ws_gpu_8000"
+    assert records_stem("object_soft", "id", "x/snapshots/vo-c-long_step012000.pt") == "object_soft_id_vo-c-long_step012000"

@@ -272,7 +272,7 @@ def _read_cached(entry: Path, cfg: DPConfig, key: str) -> DemoWindows | None:
         return None
     if meta.get("key") != key or meta.get("format") != CACHE_FORMAT:
         return None
-    load = lambda name: np.load(entry / f"{name}.npy", mmap_mode="r", allow_pickle=False)  # noqa: E731
+    load = lambda name: np.load(entry / f"{name}.npy", mmap_mode="r", allow_pickle=False)
     frames = {k: load(f"frame_{k}") for k in meta["frames"]}
     return DemoWindows(frames, load("actions"), np.asarray(meta["obs_starts"]), np.asarray(meta["act_starts"]), cfg,
                        key, tuple(meta["camera_render_size"]))

@@ -173,8 +173,9 @@ def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
     closed = closed_loop_summaries(results_dir)
     head = ("| recipe (run) | demos trained / held out | step | training min | held-out pos mm | 1st action mm | rot deg "
             "| gripper | training pos mm | closed-loop episodes | TSR | DSR |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
-    lines = [f"{variant}: open-loop error of the executed actions at every replanning step; closed-loop TSR and DSR "
-             "on the ID protocol", "", head]
+    title = (f"{variant}: open-loop error of the executed actions at every replanning step; closed-loop TSR and DSR "
+             "on the ID protocol")
+    lines = [title, "", head]
     for r in rows:
         h, t = r["heldout"], r["training"]
         c = closed.get((r["run"], r["step"]))

@@ -13,7 +13,9 @@ Every episode ends in a record, whatever the policy does; its ``termination`` sa
   code, a kill); ``error`` says how. Nothing of the episode survives, so ``r_max`` is ``None``.
 
 Records go to a JSONL file, one line per finished episode, written by the main process only.
-Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``) and
+Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``, and for a
+trained policy file its ``policy_sha256``, so that a file retrained under the same name is
+another run) and
 ``record_sha256``, a hash of everything but the wall time. A re-run with the same configuration
 skips the episodes already there, after verifying every line, so an interrupted evaluation
 neither repeats nor loses an episode and an edited or corrupt record is refused with its file
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -70,12 +73,41 @@ def read_records(path: Path) -> list[dict]:
 
 
 def run_records(path: Path, policy: str, obs_mode: str, control_mode: str,
-                camera_size: tuple[int, int] | None = None) -> dict[tuple, dict]:
+                camera_size: tuple[int, int] | None = None, policy_sha256: str | None = None) -> dict[tuple, dict]:
     """The verified records of one run configuration in ``path``, by episode key (resume matches on
-    the configuration: another policy, obs mode, control mode or camera size is another run)."""
+    the configuration: another policy, obs mode, control mode or camera size is another run, and
+    so is another policy file's content; records from before the hash was kept match on the rest)."""
     config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
               "tactile_model": tactile_model(obs_mode), "camera_size": recorded_camera_size(obs_mode, camera_size)}
-    return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())}
+    return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())
+            and r.get("policy_sha256", policy_sha256) == policy_sha256}
+
+
+def policy_file_sha256(spec: str) -> str | None:
+    """SHA-256 of the file of a trained policy (a spec naming a ``.pt``), None for other policies
+    (built in, ``module:Class``, a server), whose code is not a file the evaluator can pin."""
+    if not str(spec).endswith(".pt"):
+        return None
+    digest = hashlib.sha256()
+    with open(spec, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def policy_tag(spec: str) -> str:
+    """A file-name-safe name of a policy spec: a trained baseline by its run directory
+    (``vo-c-cpu``), a snapshot or an exported policy by its file (``vo-c-cpu_step003000``); a
+    ``ws://host:port`` or ``module:Class`` with its punctuation replaced."""
+    source = str(spec)
+    if source.endswith(".pt"):
+        source = Path(spec).parent.name if Path(spec).name == "policy.pt" else Path(spec).stem
+    return re.sub(r"[^A-Za-z0-9-]+", "_", source).strip("_")
+
+
+def records_stem(suite: str, protocol: str, spec: str) -> str:
+    """The stem of an evaluation's files (records, report, plots): ``<suite>_<protocol>_<policy tag>``."""
+    return f"{suite}_{protocol}_{policy_tag(spec)}"
 
 
 def tactile_model(obs_mode: str) -> int | None:
@@ -115,13 +147,15 @@ def _seal(rec: dict) -> dict:
     return rec
 
 
-def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None) -> dict:
+def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None,
+                policy_sha256: str | None = None) -> dict:
     """One episode of ``policy`` on a DSR-wrapped env (a :func:`~mani_skill_softvt.rollout.rollout`
     that the env ends); the record with its audit receipt.
 
     Never raises for what the policy does (see the module docstring for the terminations).
     ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
-    ``policy_spec`` is how the policy was named to the evaluator (default: its ``name``).
+    ``policy_spec`` is how the policy was named to the evaluator (default: its ``name``);
+    ``policy_sha256``, the hash of its file if it is one (kept in the record).
     """
     from ..rollout import Observer, rollout
 
@@ -153,6 +187,8 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
            "dropped": info_bool(info, "dropped"), "steps": ep.steps, "r_max": float(env.r_max),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
+    if policy_sha256 is not None:
+        rec["policy_sha256"] = policy_sha256
     return _seal(rec)
 
 
@@ -163,10 +199,13 @@ def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) ->
            "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
            "steps": None, "r_max": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
            "receipt": {"package_version": __version__, "privileged": False}}
+    if rec.get("policy_sha256", "") is None:
+        del rec["policy_sha256"]  # kept only for policy files, as in run_episode
     return _seal(rec)
 
 
-def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, camera_size, queue) -> int:
+def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, camera_size, policy_sha256,
+            queue) -> int:
     from .policies import load_policy
     from .wrapper import make_env
 
@@ -180,7 +219,7 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
     try:
         for ep in batch:
             queue.put(("start", ep))
-            rec = run_episode(env, policy, ep, policy_spec=policy_spec)
+            rec = run_episode(env, policy, ep, policy_spec=policy_spec, policy_sha256=policy_sha256)
             queue.put(("record", rec))
             if rec["termination"] == "sim_unstable":  # start the next episode from a freshly built simulator
                 env.close()
@@ -213,7 +252,8 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
                          f"size (leave camera_size out), not {camera_size[0]}x{camera_size[1]}")
     camera_size = tuple(camera_size or wanted or ()) or None
     camera_sensor_configs(camera_size)  # a size too small is an error here, naming it, not in a worker
-    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode, "camera_size": camera_size}
+    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode, "camera_size": camera_size,
+              "policy_sha256": policy_file_sha256(policy_spec)}
     done = run_records(out, **config)
     todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
@@ -225,7 +265,8 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
         batches = defaultdict(list)
         for ep in todo:
             batches[(ep["suite"], ep["task_id"])].append(ep)
-        items = [(b, policy_spec, obs_mode, control_mode, camera_size) for b in batches.values()]
+        items = [(b, policy_spec, obs_mode, control_mode, camera_size, config["policy_sha256"])
+                 for b in batches.values()]
         in_flight, deaths = {}, 0
         for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True):
             if kind == "message":
@@ -252,3 +293,63 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
         todo = [ep for ep in todo if episode_key(ep) not in done] if deaths else []
     records = run_records(out, **config) if ran else done
     return [records[episode_key(ep)] for ep in episodes if episode_key(ep) in records]
+
+
+RUN_FIELDS = ("policy", "obs_mode", "control_mode", "camera_size", "policy_sha256")  # what names a run
+NOT_REPRODUCED = ("wall_s", "record_sha256")  # the wall time differs run to run, and with it the hash
+
+
+def record_differences(stored: dict, new: dict) -> list[str]:
+    """The fields in which two records of one episode differ (the receipt's by ``receipt.<name>``),
+    but the wall time."""
+    out = []
+    for k in sorted(set(stored) | set(new)):
+        if k in NOT_REPRODUCED:
+            continue
+        a, b = stored.get(k), new.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += [f"{k}.{f}" for f in record_differences(a, b)]
+        elif a != b:
+            out.append(k)
+    return out
+
+
+def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=None) -> list[tuple[dict, list[str]]]:
+    """Run the first ``per_task`` recorded episodes of each task in ``path`` again (None: all), with
+    the configuration they were recorded with; (stored record, the fields that differ) each.
+
+    Refuses before running anything if the file holds several runs, or if the policy file is not
+    the one the records were made with (its ``policy_sha256``)."""
+    import tempfile
+
+    path = Path(path)
+    records = read_records(path)
+    if not records:
+        raise ValueError(f"{path}: no records to reproduce")
+    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS]) for r in records}
+    if len(runs) > 1:
+        raise ValueError(f"{path} holds records of {len(runs)} run configurations (policy, modes, camera size, policy "
+                         "file); reproduce a file of one run")
+    first = records[0]
+    spec, sha = first["policy"], first.get("policy_sha256")
+    if sha is not None:
+        if not Path(spec).is_file():
+            raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
+                             "name it from (the repository root for committed policies)")
+        if policy_file_sha256(spec) != sha:
+            raise ValueError(f"{path}: {spec} is not the policy file these records were made with (its SHA-256 "
+                             f"differs from their policy_sha256 {sha[:12]}...): it was replaced or retrained")
+    chosen, count = [], defaultdict(int)
+    for r in records:
+        key = (r["suite"], r["task_id"])
+        if per_task is None or count[key] < per_task:
+            count[key] += 1
+            chosen.append(r)
+    size = first.get("camera_size")
+    with tempfile.TemporaryDirectory(prefix="reproduce-") as tmp:
+        new = evaluate([{k: r[k] for k in ("suite", "task_id", "condition", "seed")} for r in chosen], spec,
+                       Path(tmp) / "records.jsonl", workers, first["obs_mode"], first["control_mode"], progress=progress,
+                       camera_size=tuple(size) if size else None)
+    by_key = {episode_key(r): r for r in new}
+    return [(r, record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])
+            for r in chosen]
