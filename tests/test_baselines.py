@@ -576,20 +576,62 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     from mani_skill_softvt.baselines import report
     from mani_skill_softvt.evaluation.runner import record_hash
 
-    def rec(variant, seed, success, r_max):
+    def rec(variant, seed, success, r_max, policy="x.pt", sha="a" * 64):
         r = ({"suite": "object_soft", "task_id": 0, "condition": "id", "seed": seed, "success": success,
                       "dsr_success": success and r_max <= 1, "r_max": r_max, "termination": "success" if success else "timeout",
-                      "receipt": {"policy": f"diffusion_policy[{variant}]"}, "policy": "x.pt", "tau_o": 0.01})
+                      "receipt": {"policy": f"diffusion_policy[{variant}]"}, "policy": policy, "tau_o": 0.01,
+                      "policy_sha256": sha})
         return {**r, "record_sha256": record_hash(r)}
 
-    path = tmp_path / "r.jsonl"
+    path, old = tmp_path / "r.jsonl", tmp_path / "old.jsonl"
     rows = [rec("vo-c", i, i < 4, 1.5 if i < 1 else 0.5) for i in range(10)] + [rec("vt-b", i, False, 0.1) for i in range(5)]
+    rows += [rec("vo-c", i, True, 0.5, policy="y.pt", sha=s) for i, s in ((0, "b" * 64), (1, "c" * 64))]
     path.write_text("".join(json.dumps(r) + "\n" for r in rows))
-    data = report.main([str(path), "--out", str(tmp_path)])
-    vo = data["object_soft/id/vo-c"]
+    old.write_text("".join(json.dumps(rec("vo-c", i, False, 0.2)) + "\n" for i in range(3)))
+    data = report.main([str(path), "--legacy", str(old), "--out", str(tmp_path)])
+    vo = data["object_soft/id/vo-c (x)"]
     assert (vo["episodes"], vo["tsr"], vo["dsr"], vo["gap_share_of_successes"]) == (10, 0.4, 0.3, 0.25)
     assert vo["gap_share_ci95"][0] < 0.25 < vo["gap_share_ci95"][1] and vo["paper"][1:] == (37.4, 33.6)
-    assert data["object_soft/id/vt-b"]["gap_share_ci95"] is None
+    assert data["object_soft/id/vt-b (x)"]["gap_share_ci95"] is None
+    # Two files of one name scored (retrained in between) never pool; older records stay apart, marked.
+    assert data["object_soft/id/vo-c (y) sha bbbbbbbb"]["episodes"] == 1
+    assert data["object_soft/id/vo-c (x) [old physics]"]["episodes"] == 3
     text = (tmp_path / "results.md").read_text()
-    assert "| object_soft | ID | vo-c | 10 | 40.0 [" in text and "no successes" in text
-    assert "| object_soft/id/vo-c | 4 | 0 | 6 | 0 | 0 | 0 | 1 | 0.500 |" in text  # one squeeze past tolerance
+    assert "| object_soft | ID | vo-c (x) | 10 | 40.0 [" in text and "no successes" in text
+    assert "| object_soft/id/vo-c (x) | 4 | 0 | 6 | 0 | 0 | 0 | 1 | 0.500 |" in text  # one squeeze past tolerance
+
+
+def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):
+    from mani_skill_softvt.baselines import export as E
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
+
+    _write_demos(tmp_path / "demos")
+    cfg = make_config("vt-c", **TINY)
+    source = T.train(cfg, tmp_path / "demos", tmp_path / "run", progress=False)
+    dest = tmp_path / "policies" / "vt-c-tiny.pt"
+    assert E.export(source, dest)
+    full, half = torch.load(source, weights_only=False), torch.load(dest, weights_only=False)
+    assert half["exported_from"] == __import__("hashlib").sha256(source.read_bytes()).hexdigest()
+    for k, v in half["model"].items():
+        if k.startswith("normalize."):
+            assert v.dtype == torch.float32 and torch.equal(v, full["model"][k])
+        elif v.is_floating_point():
+            # float16 keeps 11 significant bits: each weight within 2^-11 of itself, relatively.
+            assert v.dtype == torch.float16
+            assert torch.allclose(v.float(), full["model"][k], rtol=2 ** -11, atol=6e-8)
+    _, model, _ = load_policy_file(dest)  # loads as float32 weights
+    assert all(p.dtype == torch.float32 for p in model.parameters())
+    # Unchanged source: nothing written with --if-changed; too large: refused, the previous file kept.
+    mtime = dest.stat().st_mtime_ns
+    assert not E.export(source, dest, if_changed=True) and dest.stat().st_mtime_ns == mtime
+    with pytest.raises(ValueError, match="MiB.*left as it was"):
+        E.export(source, dest, max_mib=1e-4)
+    assert dest.stat().st_mtime_ns == mtime and torch.load(dest, weights_only=False)["exported_from"]
+    # The cpu preset's VO and VT networks fit in a committed policy's 20 MiB in float16.
+    import io
+
+    for variant in ("vo-c", "vt-c"):
+        preset = make_config(variant)
+        buf = io.BytesIO()
+        torch.save(E.half_state(DiffusionPolicyModel(preset, T.empty_stats(preset)).state_dict()), buf)
+        assert buf.tell() / 2 ** 20 < E.MAX_MIB, (variant, buf.tell() / 2 ** 20)

@@ -1,14 +1,17 @@
 """The baselines' results beside the paper's: TSR, DSR, TSR - DSR and its share of successes.
 
-    python -m mani_skill_softvt.baselines.report baselines/results/object_soft_id_*.jsonl
+    python -m mani_skill_softvt.baselines.report baselines/results/object_soft_id_*.jsonl \
+        --legacy baselines/results/old_physics/*.jsonl
 
 Reads evaluation records (each verified against its hash), groups them by the policy's name in
-the receipt (``diffusion_policy[vo-c,cpu]``, ...: variant and recipe), and writes ``<out>/results.md`` and ``.json``: per
+the receipt (``diffusion_policy[vo-c,cpu]``, ...: variant and recipe) and, for trained policy
+files, by the file (its name and, where two files of one name were scored, its SHA-256), and writes ``<out>/results.md`` and ``.json``: per
 variant the episode count, TSR and DSR with 95 % Wilson intervals, the gap TSR - DSR (successes
 that left the calibrated tolerance) and its share of the successes, how episodes ended, how many
 episodes of any ending squeezed the object past its tolerance (R_max > 1, or crushed until the
 FEM blew up: harm that TSR - DSR cannot show when a policy never succeeds), and the paper's
-numbers for the same configuration.
+numbers for the same configuration. Records given with ``--legacy`` (made under an older physics
+or sensor) are rows of their own, marked ``[old physics]``, never pooled with today's.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import argparse
 from pathlib import Path
 
 from ..evaluation.metrics import summarize
-from ..evaluation.runner import read_records
+from ..evaluation.runner import policy_tag, read_records
 from ..fileio import atomic_write, atomic_write_json
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
@@ -47,10 +50,30 @@ def _ci(x: float, ci) -> str:
     return "- (no successes)" if ci is None else f"{_pct(x)} [{_pct(ci[0])}, {_pct(ci[1])}]"
 
 
-def build(records: list[dict]) -> tuple[str, dict]:
-    groups: dict[str, list[dict]] = {}
+def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
+    """Each record's row label: the variant, the policy file's name for a trained policy, its
+    hash's start where files of one name differ, and ``[old physics]`` for legacy records."""
+    def base(r):
+        label = variant_of(r)
+        return f"{label} ({policy_tag(r['policy'])})" if str(r["policy"]).endswith(".pt") else label
+
+    hashes: dict[str, set] = {}
     for r in records:
-        groups.setdefault((r["suite"], r["condition"], variant_of(r)), []).append(r)
+        hashes.setdefault(base(r), set()).add(r.get("policy_sha256"))
+    out = []
+    for r in records:
+        label = base(r)
+        if len(hashes[label]) > 1:
+            label += f" sha {str(r.get('policy_sha256'))[:8]}"
+        out.append(label + (" [old physics]" if legacy else ""))
+    return out
+
+
+def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
+    groups: dict[str, list[dict]] = {}
+    for recs, old in ((records, False), (list(legacy), True)):
+        for r, label in zip(recs, group_labels(recs, old)):
+            groups.setdefault((r["suite"], r["condition"], label), []).append(r)
     data, lines = {}, []
     header = ("| suite | protocol | variant | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR % [95% CI] | share of successes % [95% CI] "
               "| paper TSR / DSR (model) |\n|---|---|---|---|---|---|---|---|---|")
@@ -58,7 +81,7 @@ def build(records: list[dict]) -> tuple[str, dict]:
     for (suite, condition, variant), recs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "id", kv[0][2])):
         s = summarize(recs)
         protocol = "ID" if condition == "id" else f"OOD {condition}"
-        paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0]) if suite == "object_soft" and condition == "id" else None
+        paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0].split(" ")[0]) if suite == "object_soft" and condition == "id" else None
         data[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
         (lo_t, hi_t), (lo_d, hi_d) = s["tsr_ci95"], s["dsr_ci95"]
         lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {_pct(s['tsr'])} [{_pct(lo_t)}, {_pct(hi_t)}] "
@@ -76,14 +99,18 @@ def build(records: list[dict]) -> tuple[str, dict]:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("records", nargs="+", type=Path, help="evaluation record files (JSONL)")
+    ap.add_argument("records", nargs="*", type=Path, help="evaluation record files (JSONL)")
+    ap.add_argument("--legacy", nargs="*", type=Path, default=[],
+                    help="record files made under an older physics or sensor: rows of their own, marked [old physics]")
     ap.add_argument("--out", type=Path, default=None, help="directory for results.md/.json (default: the records')")
     args = ap.parse_args(argv)
     records = [r for path in args.records for r in read_records(path)]
-    if not records:
+    legacy = [r for path in args.legacy for r in read_records(path)]
+    if not records and not legacy:
         ap.error("no records in the given files")
-    text, data = build(records)
-    out = args.out or args.records[0].parent
+    text, data = build(records, legacy)
+    out = args.out or (args.records or [args.legacy[0].parent.parent])[0]
+    out = out.parent if out.suffix == ".jsonl" else out
     atomic_write(out / "results.md", lambda p: p.write_text(text))
     atomic_write_json(out / "results.json", data)
     print(text)
