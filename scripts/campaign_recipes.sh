@@ -6,7 +6,8 @@
 # each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
 # spent; run again to continue. Runs (checkpoints, prepared data) stay beside the demos
 # (SOFTVT_RUNS_DIR, default /root/softvt-runs); every snapshot's open-loop error is logged to
-# baselines/search/<variant>.jsonl, which is committed.
+# baselines/search/<variant>.jsonl, which is committed. SET="key=value ..." adds overrides to
+# every recipe (runs named <variant>-<recipe>+key=value).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VARIANT=${1:-vo-c}; BUDGET=${2:-150}; shift $(( $# < 2 ? $# : 2 ))
@@ -17,5 +18,6 @@ recipes=("$@")
 if (( ${#recipes[@]} == 0 )); then
   mapfile -t recipes < <("$PY" -c "from mani_skill_softvt.baselines.search import RECIPES; print(*RECIPES, sep='\n')")
 fi
+read -r -a sets <<< "${SET:-}"
 "$PY" -m mani_skill_softvt.baselines.search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
-  --demos "$SOFTVT_DEMOS_DIR" --runs "$SOFTVT_RUNS_DIR" --demos-per-task 90 --heldout 10
+  --demos "$SOFTVT_DEMOS_DIR" --runs "$SOFTVT_RUNS_DIR" --demos-per-task 90 --heldout 10 --set "${sets[@]}"
