@@ -64,6 +64,10 @@ def main(argv=None) -> dict:
     if args.rescore is not None:
         return _rescore(args.rescore, args.percentile, args.out)
     if args.reproduce is not None:
+        given = [f for f, v in (("--policy", args.policy != "expert"), ("--obs-mode", args.obs_mode), ("--ray", args.ray),
+                                ("--control-mode", args.control_mode), ("--camera-size", args.camera_size)) if v]
+        if given:
+            ap.error(f"--reproduce runs the records' own policy and configuration; drop {', '.join(given)}")
         return _reproduce(ap, args.reproduce, args.episodes_per_task or 1, args.workers)
     args.episodes_per_task = 1 if args.episodes_per_task is None else args.episodes_per_task
     _resolve_modes(ap, args)
@@ -157,10 +161,14 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
     except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
         ap.error(str(e))
     bar.close()
-    differing = [(r, fields) for r, fields in results if fields]
-    for r, fields in results:
+    from .evaluation.runner import relative_difference
+
+    differing = [r for r, _, fields in results if fields]
+    for r, new, fields in results:
         where = f"{r['suite']} task {r['task_id']} {r['condition']} seed {r['seed']}"
-        print(f"{where}: {'differs in ' + ', '.join(fields) if fields else 'the same, bit for bit'}")
+        gaps = [(f, relative_difference(r.get(f), new.get(f)) if new is not None and "." not in f else None) for f in fields]
+        named = [f if gap is None else f"{f} (by at most {gap:.1e} relative)" for f, gap in gaps]
+        print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
     print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
     if differing:
         raise SystemExit(1)

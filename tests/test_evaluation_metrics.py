@@ -103,3 +103,12 @@ def test_ratio_and_peak():
     assert r_max([]) == 0.0
     with pytest.raises(ValueError, match="positive"):
         deformation_ratio(d, 0.0)
+
+
+def test_relative_difference_measures_rounding_not_other_kinds_of_change():
+    from mani_skill_softvt.evaluation.runner import relative_difference
+
+    assert relative_difference(0.5, 0.5 * (1 + 1e-15)) < 2e-15
+    assert abs(relative_difference([1.0, 2.0], [1.0, 2.2]) - 0.2 / 2.2) < 1e-12
+    assert relative_difference(True, False) is None and relative_difference("a", "b") is None
+    assert relative_difference([1.0], [1.0, 2.0]) is None and relative_difference(None, 1.0) is None

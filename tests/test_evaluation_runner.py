@@ -52,7 +52,8 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
         evaluate_cli.main(["--reproduce", str(path)])
     assert stop.value.code == 1
     out = capsys.readouterr().out
-    assert "task 3 id" in out and "differs in r_max\n" in out and "0 of 1 episodes" in out
+    assert "task 3 id" in out and "differs in r_max (by at most" in out and "0 of 1 episodes" in out
+    assert "deformation_trace" not in out  # everything else the same, bit for bit
 
 
 def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
@@ -71,6 +72,9 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
     rec["record_sha256"] = record_hash(rec)
     path = tmp_path / "records.jsonl"
     path.write_text(json.dumps(rec) + "\n")
+    older = {k: v for k, v in rec.items() if k not in ("policy_sha256", "record_sha256")}
+    older["seed"] = 2  # a record from before the hash was kept: of the same run, not another
+    path.write_text(json.dumps(rec) + "\n" + json.dumps({**older, "record_sha256": record_hash(older)}) + "\n")
     policy.write_bytes(b"retrained")
     with pytest.raises(ValueError, match="not the policy file these records were made with"):
         reproduce(path)

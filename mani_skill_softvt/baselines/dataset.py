@@ -1,8 +1,8 @@
 """Training windows from rendered expert demonstrations.
 
 Reads each task's trajectory file (actions, binary actions) and its ``rgb+tactile`` rendering
-(:class:`~mani_skill_softvt.data.demo_set.DemoSet` finds both), turns every frame into the
-policy's inputs (:mod:`.features`) and keeps them in memory as arrays. Only policy observations
+(:class:`~mani_skill_softvt.data.demo_set.DemoSet` finds both) and turns every frame into the
+policy's inputs (:mod:`.features`), arrays of all frames (memory-mapped files when cached). Only policy observations
 are read, never the ``evaluator/`` group or the env states.
 
 The rendering with the cameras at the config's ``camera_size`` is read when every task has one
@@ -22,17 +22,21 @@ run skips it and runs that read the same episodes the same way (recipes that dif
 optimiser or the network) share one copy. The arrays are written in place through memory maps
 and read back memory-mapped: neither preparing nor training holds the frames in memory, and two
 runs on one cache share the page cache. A cache is written in a temporary directory renamed into
-place at the end; a process that finds another live one preparing the same key waits for it,
-and a temporary directory left by a process that died is removed.
+place at the end, under a lock per key (``flock``, released by the kernel when its holder dies):
+a process that finds another preparing the same key waits for it and reads its result, and a
+temporary directory left by a process that died is removed. The key also names the cache format,
+the feature code's version and, for touch, the tactile model and each episode's rendering
+version, so a package that reads or renders differently never reads an older entry.
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
 import shutil
-import time
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,14 +50,13 @@ from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write_json, read_json
 from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
 from .config import DPConfig
-from .features import frame_features
+from .features import FEATURES_VERSION, frame_features
 
 OBS_MODE = "rgb+tactile"
 # Config fields that change the prepared arrays (anything else, e.g. the optimiser, does not).
 INPUT_FIELDS = ("variant", "camera_size", "tactile_size", "tactile_inputs", "depth_scale_um", "suite", "tasks",
                 "demos_per_task", "heldout_per_task")
 CACHE_FORMAT = 2  # the directory of .npy files (1 was one .npz beside the run)
-PREPARE_POLL_S = 5.0  # how often a process waiting for another's preparation looks again
 
 
 @dataclass
@@ -67,6 +70,7 @@ class DemoWindows:
     cfg: DPConfig
     key: str = ""  # cache_key of the sources it was read from (a resumed run checks it)
     camera_render_size: tuple[int, int] = NATIVE_CAMERA_SIZE  # (height, width) the cameras were rendered at
+    cache: Path | None = None  # the cache directory it was read from (None: prepared in memory)
 
     def __len__(self) -> int:
         return int(self.act_starts[-1])
@@ -126,16 +130,18 @@ def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]], heldout: boo
     grew, or files written again with the same episodes, keep the key: a training run resumes
     while step 1 of the campaign goes on. Renderings without digests are named by file."""
     fields = {k: getattr(cfg, k) for k in INPUT_FIELDS}
-    return hashlib.sha256(json.dumps([[_episodes_read(cfg, a, b, heldout) for _, a, b in sources], fields, heldout],
-                                     default=list).encode()).hexdigest()[:16]
+    code = [CACHE_FORMAT, FEATURES_VERSION, TACTILE_MODEL_VERSION if cfg.tactile else None]
+    return hashlib.sha256(json.dumps([[_episodes_read(cfg, a, b, heldout) for _, a, b in sources], fields, heldout,
+                                      code], default=list).encode()).hexdigest()[:16]
 
 
 def _episodes_read(cfg: DPConfig, trajectory: Path, rendered: Path, heldout: bool) -> list:
     with open_h5(rendered) as f:
         names = split_episodes(_episode_names(f), cfg, heldout, where=rendered)
         digests = [f[n].attrs.get("states_sha256") for n in names]
+        versions = [[int(f[n].attrs.get("render_version", 1)), tactile_model_of(f[n])] for n in names]
     if all(isinstance(d, str) for d in digests):
-        return [rendered.name, digests]
+        return [rendered.name, digests, versions]
     return [(str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns) for p in (trajectory, rendered)]
 
 
@@ -170,7 +176,7 @@ def _plan_episodes(cfg: DPConfig, demos_root: Path, heldout: bool) -> tuple[list
                                      f"package renders model {TACTILE_MODEL_VERSION}; re-render with `python -m "
                                      f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
                 obs = fr[name]["obs"]
-                n, steps = obs[TCP_POSE].shape[0], ft[name]["actions"].shape[0]
+                n, steps = obs[TCP_POSE].shape[0], ft[name][_action_column(cfg)].shape[0]
                 if n != steps + 1:
                     raise ValueError(f"{rendered}:{name}: {n} frames for {steps} actions (expected one more); "
                                      f"the rendering is stale: re-render task {task}")
@@ -215,7 +221,7 @@ def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False, into: Path |
 
     frames: dict[str, np.ndarray] = {}
     actions = array("actions", (action_count, cfg.action_dim), np.float32)
-    column = "actions_binary" if cfg.binary_gripper else "actions"
+    column = _action_column(cfg)
     for i, (task, traj, rendered, name, n, steps) in enumerate(tqdm(episodes, desc="prepare demos", unit="demo")):
         with open_h5(traj) as ft, open_h5(rendered) as fr:
             actions[act_starts[i]:act_starts[i + 1]] = ft[name][column][()].astype(np.float32)
@@ -230,6 +236,11 @@ def prepare(cfg: DPConfig, demos_root: Path, heldout: bool = False, into: Path |
     return DemoWindows(frames, actions, obs_starts, act_starts, cfg, camera_render_size=size)
 
 
+def _action_column(cfg: DPConfig) -> str:
+    """The trajectory's action column a variant learns: continuous closure or binary."""
+    return "actions_binary" if cfg.binary_gripper else "actions"
+
+
 def _needed_keys(cfg: DPConfig) -> list[str]:
     keys = [QPOS, TCP_POSE, *(camera_key(c) for c in CAMERAS)]
     return keys + (tactile_keys() if cfg.tactile else [])
@@ -241,29 +252,6 @@ def data_key(cfg: DPConfig, demos_root: Path, heldout: bool = False) -> str:
     return cache_key(cfg, _sources(cfg, demos_root), heldout)
 
 
-def boot_id() -> str:
-    """This machine's boot (Linux), so that a temporary directory left by a machine that since
-    restarted is not mistaken for one of a live process that got the same pid."""
-    try:
-        return Path("/proc/sys/kernel/random/boot_id").read_text().strip()[:8]
-    except OSError:
-        return "noboot"
-
-
-def _owner_alive(tmp: Path) -> bool:
-    """Whether the process that named the temporary directory ``tmp`` (``.<key>.tmp-<boot>-<pid>``) runs."""
-    boot, _, pid = tmp.name.rsplit(".tmp-", 1)[1].partition("-")
-    if boot != boot_id() or not pid.isdigit():
-        return False
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _read_cached(entry: Path, cfg: DPConfig, key: str) -> DemoWindows | None:
     """The memory-mapped windows of a finished cache directory, None if it is not one of ``key``."""
     try:
@@ -273,14 +261,19 @@ def _read_cached(entry: Path, cfg: DPConfig, key: str) -> DemoWindows | None:
     if meta.get("key") != key or meta.get("format") != CACHE_FORMAT:
         return None
     load = lambda name: np.load(entry / f"{name}.npy", mmap_mode="r", allow_pickle=False)
-    frames = {k: load(f"frame_{k}") for k in meta["frames"]}
-    return DemoWindows(frames, load("actions"), np.asarray(meta["obs_starts"]), np.asarray(meta["act_starts"]), cfg,
-                       key, tuple(meta["camera_render_size"]))
+    try:
+        frames, actions = {k: load(f"frame_{k}") for k in meta["frames"]}, load("actions")
+    except (OSError, ValueError):  # a file missing or damaged: the entry is rebuilt
+        return None
+    if len(actions) != meta["act_starts"][-1] or any(len(v) != meta["obs_starts"][-1] for v in frames.values()):
+        return None
+    return DemoWindows(frames, actions, np.asarray(meta["obs_starts"]), np.asarray(meta["act_starts"]), cfg,
+                       key, tuple(meta["camera_render_size"]), Path(entry).parent)
 
 
 def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: bool = False) -> DemoWindows:
     """:func:`prepare`, through the cache directory ``cache`` when given (see the module docstring):
-    the entry of this key if there is one, else prepared into it."""
+    the entry of this key if there is one, else prepared into it under the key's lock."""
     key = data_key(cfg, demos_root, heldout)
     if cache is None:
         windows = prepare(cfg, demos_root, heldout)
@@ -291,25 +284,36 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: b
         raise ValueError(f"{cache} is a file (a data cache of an older version of this package, one .npz): delete "
                          "it; the cache is now a directory of that name")
     entry = cache / key
-    while True:
-        found = _read_cached(entry, cfg, key)
+    found = _read_cached(entry, cfg, key)  # a finished entry appears whole (renamed into place): no lock needed
+    if found is not None:
+        return found
+    cache.mkdir(parents=True, exist_ok=True)
+    with open(cache / f".{key}.lock", "a") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"waiting for another process preparing {entry}", file=sys.stderr, flush=True)
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        found = _read_cached(entry, cfg, key)  # the other process's result
         if found is not None:
             return found
-        others = [p for p in cache.glob(f".{key}.tmp-*") if p.is_dir()]
-        live = [p for p in others if _owner_alive(p)]
-        for p in set(others) - set(live):  # left by a process that died while preparing
-            shutil.rmtree(p, ignore_errors=True)
-        if not live:
-            break
-        time.sleep(PREPARE_POLL_S)  # another process is preparing the same arrays: use its result
-    if entry.exists():  # an unfinished or foreign directory under this key's name
-        shutil.rmtree(entry)
-    tmp = cache / f".{key}.tmp-{boot_id()}-{os.getpid()}"
-    windows = prepare(cfg, demos_root, heldout, into=tmp)
-    atomic_write_json(tmp / "meta.json", {
-        "format": CACHE_FORMAT, "key": key, "heldout": heldout, "frames": sorted(windows.frames),
-        "obs_starts": windows.obs_starts.tolist(), "act_starts": windows.act_starts.tolist(),
-        "camera_render_size": list(windows.camera_render_size), "episodes": windows.episodes,
-        "inputs": {k: getattr(cfg, k) for k in INPUT_FIELDS}})
-    os.replace(tmp, entry)
-    return _read_cached(entry, cfg, key)
+        # Holding the lock: whatever else is under this key was left unfinished by a process that died.
+        for stale in [entry, *cache.glob(f".{key}.tmp-*")]:
+            if stale.exists():
+                shutil.rmtree(stale)
+        tmp = cache / f".{key}.tmp-{os.getpid()}"
+        try:
+            windows = prepare(cfg, demos_root, heldout, into=tmp)
+            atomic_write_json(tmp / "meta.json", {
+                "format": CACHE_FORMAT, "key": key, "heldout": heldout, "frames": sorted(windows.frames),
+                "obs_starts": windows.obs_starts.tolist(), "act_starts": windows.act_starts.tolist(),
+                "camera_render_size": list(windows.camera_render_size), "episodes": windows.episodes,
+                "inputs": {k: getattr(cfg, k) for k in INPUT_FIELDS}})
+            os.replace(tmp, entry)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    found = _read_cached(entry, cfg, key)
+    if found is None:
+        raise RuntimeError(f"{entry}: the data cache written a moment ago does not read back; delete it and re-run")
+    return found

@@ -24,6 +24,8 @@ from ..physics.transforms import down_rotvec
 from ..tasks.robot import base_frame_pose
 from .config import DPConfig
 
+# Bumped whenever frame_features computes anything differently: prepared training data is keyed by it.
+FEATURES_VERSION = 1
 CAMERAS = dict(zip(("base", "hand"), ENV_CAMERAS))  # input name -> the env's camera
 DOWN_ROTVEC = down_rotvec(0.0)
 

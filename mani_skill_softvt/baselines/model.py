@@ -68,7 +68,8 @@ class DiffusionPolicyModel(nn.Module):
         self.image_keys = image_keys(cfg)
         self.encoders = nn.ModuleDict({
             k: ImageEncoder(cfg.tactile_channels if k.startswith("tactile") else 3, cfg.encoder_widths,
-                            cfg.encoder_blocks, cfg.image_feature_dim, resnet_stem=cfg.resnet_stem, channels_last=True)
+                            cfg.encoder_blocks, cfg.image_feature_dim, resnet_stem=cfg.resnet_stem,
+                            channels_last=cfg.precision == "bf16")  # fp32 stays the reference layout
             for k in self.image_keys})
         self.normalize = nn.ModuleDict({k: RangeNormalizer(*stats[k]) for k in self.low_dim_keys + ["action"]})
         per_frame = len(self.image_keys) * cfg.image_feature_dim + cfg.state_dim

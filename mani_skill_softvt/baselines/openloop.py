@@ -107,6 +107,8 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
         raise ValueError(f"{policy_path} was trained on every demo (heldout_per_task=0): nothing is held out. Train "
                          "with `--set heldout_per_task=10` (the last 10 demos of each task are then never trained on)")
     torch.set_num_threads(threads)
+    if cache is None and ckpt.get("data_cache") and Path(ckpt["data_cache"]).is_dir():
+        cache = Path(ckpt["data_cache"])  # where its run prepared the data (a shared cache, say)
     heldout, training = windows or load_run_windows(cfg, run_dir_of(policy_path), demos_root, cache)
     if ckpt.get("data_key") not in (None, training.key):
         raise ValueError(f"{policy_path} was trained on other demos than {demos_root} now holds (its episodes "
@@ -142,7 +144,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
     ap.add_argument("--windows", type=int, default=500, help="at most this many replanning steps per set")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--cache", type=Path, default=None, help="the run's data cache, if not <run>/data_cache")
+    ap.add_argument("--cache", type=Path, default=None,
+                    help="the data cache to read (default: the one the run trained from, else <run>/data_cache)")
     args = ap.parse_args(argv)
     try:
         result = openloop(args.policy, args.demos, args.windows, args.threads, cache=args.cache)

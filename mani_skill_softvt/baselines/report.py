@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..evaluation.metrics import summarize
+from ..evaluation.metrics import percent_ci, summarize
 from ..evaluation.runner import policy_tag, read_records
 from ..fileio import atomic_write, atomic_write_json
 
@@ -38,33 +38,28 @@ ENDINGS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "wor
 
 def variant_of(record: dict) -> str:
     """``diffusion_policy[vt-c,cpu,rgb+depth]`` -> ``vt-c,cpu,rgb+depth`` (variant first)."""
-    name = record["receipt"]["policy"]
+    name = record["receipt"].get("policy") or record["policy"]  # a worker_died record's receipt has no name
     return name[name.index("[") + 1:name.index("]")] if "[" in name else name
-
-
-def _pct(x) -> str:
-    return "-" if x is None else f"{100 * x:.1f}"
-
-
-def _ci(x: float, ci) -> str:
-    return "- (no successes)" if ci is None else f"{_pct(x)} [{_pct(ci[0])}, {_pct(ci[1])}]"
 
 
 def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
     """Each record's row label: the variant, the policy file's name for a trained policy, its
     hash's start where files of one name differ, and ``[old physics]`` for legacy records."""
+    # A worker_died record names no variant (its policy never ran): it takes that of its file's other records.
+    named = {r["policy"]: variant_of(r) for r in records if r["receipt"].get("policy")}
+
     def base(r):
-        label = variant_of(r)
+        label = variant_of(r) if r["receipt"].get("policy") else named.get(r["policy"], variant_of(r))
         return f"{label} ({policy_tag(r['policy'])})" if str(r["policy"]).endswith(".pt") else label
 
     hashes: dict[str, set] = {}
-    for r in records:
-        hashes.setdefault(base(r), set()).add(r.get("policy_sha256"))
+    for r in records:  # a record from before the hash was kept is of whichever file it names
+        hashes.setdefault(base(r), set()).update({r["policy_sha256"]} if r.get("policy_sha256") else set())
     out = []
     for r in records:
         label = base(r)
-        if len(hashes[label]) > 1:
-            label += f" sha {str(r.get('policy_sha256'))[:8]}"
+        if len(hashes[label]) > 1 and r.get("policy_sha256"):
+            label += f" sha {r['policy_sha256'][:8]}"
         out.append(label + (" [old physics]" if legacy else ""))
     return out
 
@@ -83,11 +78,9 @@ def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
         protocol = "ID" if condition == "id" else f"OOD {condition}"
         paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0].split(" ")[0]) if suite == "object_soft" and condition == "id" else None
         data[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
-        (lo_t, hi_t), (lo_d, hi_d) = s["tsr_ci95"], s["dsr_ci95"]
-        lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {_pct(s['tsr'])} [{_pct(lo_t)}, {_pct(hi_t)}] "
-                     f"| {_pct(s['dsr'])} [{_pct(lo_d)}, {_pct(hi_d)}] "
-                     f"| {_pct(s['gap'])} [{_pct(s['gap_ci95'][0])}, {_pct(s['gap_ci95'][1])}] "
-                     f"| {_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
+        lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
+                     f"| {percent_ci(s['dsr'], s['dsr_ci95'])} | {percent_ci(s['gap'], s['gap_ci95'])} "
+                     f"| {percent_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
                      f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
     columns = (*ENDINGS, "past tolerance (R_max > 1 or crushed), any end", "median R_max")
     lines += ["", "| variant | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
@@ -102,7 +95,8 @@ def main(argv=None) -> dict:
     ap.add_argument("records", nargs="*", type=Path, help="evaluation record files (JSONL)")
     ap.add_argument("--legacy", nargs="*", type=Path, default=[],
                     help="record files made under an older physics or sensor: rows of their own, marked [old physics]")
-    ap.add_argument("--out", type=Path, default=None, help="directory for results.md/.json (default: the records')")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="directory for results.md/.json (default: the records' directory, or the --legacy files' parent's)")
     args = ap.parse_args(argv)
     records = [r for path in args.records for r in read_records(path)]
     legacy = [r for path in args.legacy for r in read_records(path)]

@@ -32,9 +32,10 @@ import os
 import time
 from pathlib import Path
 
+from ..evaluation.metrics import percent_ci
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import DEMOS_DIR, REPO_DIR
-from .config import RECIPES, VARIANTS, make_config, parse_override
+from .config import RECIPES, VARIANTS, parse_override, recipe_config
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
@@ -44,17 +45,23 @@ HELDOUT = 10  # demos per task set aside (the last ones), for every recipe alike
 SNAPSHOT_EVERY = 1500
 
 
-def recipe_config(variant: str, recipe: str, heldout: int = HELDOUT, overrides: dict | None = None, **extra):
-    """The cpu preset of ``variant`` with the recipe's overrides, ``overrides`` (``--set``) and the
+SEARCH_FIELDS = ("threads", "demos_per_task", "heldout_per_task")  # the search's own flags set these, not --set
+
+
+def search_config(variant: str, recipe: str, heldout: int = HELDOUT, overrides: dict | None = None, **extra):
+    """The recipe's config (:func:`~.config.recipe_config`) with ``overrides`` (``--set``) and the
     held-out split; ``extra`` (threads, demos per task) does not name the run."""
-    if recipe not in RECIPES:
-        raise ValueError(f"recipe {recipe!r}: choose one of {sorted(RECIPES)}")
-    return make_config(variant, "cpu", **{**RECIPES[recipe], **(overrides or {}), "heldout_per_task": heldout, **extra})
+    return recipe_config(variant, recipe, overrides, heldout_per_task=heldout, **extra)
 
 
-def recipe_label(recipe: str, sets: list[str] = ()) -> str:
-    """A recipe with its ``--set`` overrides, as runs and results name it (``long+batch_size=64``)."""
-    return "+".join([recipe, *sets])
+def recipe_label(recipe: str, overrides: dict | None = None) -> str:
+    """A recipe with its ``--set`` overrides, as runs and results name it: the parsed values in key
+    order (``long+batch_size=64+camera_size=96,96``), so one config has one name."""
+    text = lambda v: ",".join(map(str, v)) if isinstance(v, tuple) else "none" if v is None else str(v)
+    label = "+".join([recipe, *(f"{k}={text(v)}" for k, v in sorted((overrides or {}).items()))])
+    if "/" in label or label.startswith("."):
+        raise ValueError(f"run name {label!r}: overrides name a directory, so they may not hold '/' or begin with '.'")
+    return label
 
 
 def run_snapshots(run: Path) -> list[Path]:
@@ -129,6 +136,8 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
     from ..evaluation.runner import evaluate
     from .agent import read_policy_file, required_modes
 
+    if not run_snapshots(run):
+        raise ValueError(f"{run} has no snapshots to evaluate; train it first (the same command without --closed-loop)")
     snaps = [s for s in run_snapshots(run) if steps is None or snapshot_step(s) in steps]
     missing = sorted(set(steps or ()) - {snapshot_step(s) for s in snaps})
     if missing:
@@ -161,25 +170,20 @@ def closed_loop_summaries(results_dir: Path = RESULTS_DIR) -> dict[tuple[str, in
     return out
 
 
-def _pct_ci(s: dict, key: str) -> str:
-    lo, hi = s[f"{key}_ci95"]
-    return f"{100 * s[key]:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]"
-
-
 def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
     """The logged results, one row per (recipe, step), by recipe then step; closed-loop TSR and
     DSR (95 % Wilson intervals) where the snapshot was evaluated."""
     rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["run"], r["step"]))
     closed = closed_loop_summaries(results_dir)
     head = ("| recipe (run) | demos trained / held out | step | training min | held-out pos mm | 1st action mm | rot deg "
-            "| gripper | training pos mm | closed-loop episodes | TSR | DSR |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+            "| gripper | training pos mm | closed-loop episodes | TSR % [95% CI] | DSR % [95% CI] |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     title = (f"{variant}: open-loop error of the executed actions at every replanning step; closed-loop TSR and DSR "
              "on the ID protocol")
     lines = [title, "", head]
     for r in rows:
         h, t = r["heldout"], r["training"]
         c = closed.get((r["run"], r["step"]))
-        loop = f"{c['episodes']} | {_pct_ci(c, 'tsr')} | {_pct_ci(c, 'dsr')}" if c else " | | "
+        loop = f"{c['episodes']} | {percent_ci(c['tsr'], c['tsr_ci95'], 0)} | {percent_ci(c['dsr'], c['dsr_ci95'], 0)}" if c else " | | "
         lines.append(f"| {r['recipe']} ({r['run'][:6]}) | {r['episodes_trained']} / {r['episodes_heldout']} | {r['step']} | {r['train_wall_s'] / 60:.0f} | {h['position_mm_mean']:.1f} | "
                      f"{h['position_mm_first_action']:.1f} | {h['rotation_deg_mean']:.2f} | {h['gripper_mean']:.3f} | "
                      f"{t['position_mm_mean']:.1f} | {loop} |")
@@ -252,23 +256,27 @@ def main(argv=None) -> str:
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR)
     ap.add_argument("--runs", type=Path, default=RUNS_DIR, help="run directories (checkpoints, prepared data)")
     ap.add_argument("--results", type=Path, default=RESULTS_DIR, help="where the results table is logged")
-    ap.add_argument("--table", action="store_true", help="print the results logged so far and exit")
+    ap.add_argument("--table", action="store_true", help="print the results logged so far, redraw the plot, and exit")
     args = ap.parse_args(argv)
     if args.table:
-        table = format_table(args.variant, args.results)
-        plot_curves(args.variant, args.results)
-        print(table)
-        return table
+        return _report(args.variant, args.results)
     unknown = sorted(set(args.recipes) - set(RECIPES))
     if unknown:
         ap.error(f"unknown recipes {unknown}; the recipes are {sorted(RECIPES)}")
+    if args.steps is not None and args.closed_loop is None:
+        ap.error("--steps picks the snapshots --closed-loop evaluates; give --closed-loop N too")
     try:  # every run's config is checked before the first one trains for hours
         overrides = dict(parse_override(s) for s in args.set)
-        configs = {r: recipe_config(args.variant, r, args.heldout, overrides, threads=args.threads,
+        own = sorted(set(overrides) & set(SEARCH_FIELDS))
+        if own:
+            raise ValueError(f"--set {own}: the search sets these with its own flags (--threads, --demos-per-task, "
+                             "--heldout)")
+        configs = {r: search_config(args.variant, r, args.heldout, overrides, threads=args.threads,
                                     demos_per_task=args.demos_per_task) for r in args.recipes}
+        labels = {r: recipe_label(r, overrides) for r in args.recipes}
     except ValueError as e:
         ap.error(str(e))
-    runs = {r: args.runs / args.variant / f"{args.variant}-{recipe_label(r, args.set)}" for r in args.recipes}
+    runs = {r: args.runs / args.variant / f"{args.variant}-{labels[r]}" for r in args.recipes}
     if args.closed_loop is not None:
         if args.closed_loop < 1 or args.workers < 1:
             ap.error("--closed-loop and --workers must be >= 1")
@@ -277,17 +285,14 @@ def main(argv=None) -> str:
                 evaluate_snapshots(runs[recipe], args.closed_loop, args.steps, args.workers, args.results)
             except (FileNotFoundError, ValueError) as e:
                 ap.error(str(e))
-        table = format_table(args.variant, args.results)
-        plot_curves(args.variant, args.results)
-        print(table)
-        return table
+        return _report(args.variant, args.results)
     cache = args.runs / "data_cache"  # shared: recipes that read the demos alike read one copy
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
     for recipe in args.recipes:
         if deadline is not None and time.monotonic() >= deadline:
             print(f"the time budget ran out before {recipe}; run the same command again to continue")
             break
-        label, run = recipe_label(recipe, args.set), runs[recipe]  # its records and snapshots say both
+        label, run = labels[recipe], runs[recipe]  # its records and snapshots say both
         policy = train(configs[recipe], args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every,
                        cache=cache)
         for line in measure_snapshots(args.variant, label, run, configs[recipe], args.demos, args.results, args.windows,
@@ -297,8 +302,13 @@ def main(argv=None) -> str:
         if not policy.exists():
             print(f"{label}: the time budget ran out; run the same command again to continue")
             break
-    table = format_table(args.variant, args.results)
-    plot_curves(args.variant, args.results)
+    return _report(args.variant, args.results)
+
+
+def _report(variant: str, results_dir: Path) -> str:
+    """Print the table and redraw the curves (``<results>/<variant>.png``)."""
+    table = format_table(variant, results_dir)
+    plot_curves(variant, results_dir)
     print(table)
     return table
 

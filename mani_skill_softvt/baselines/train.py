@@ -34,7 +34,15 @@ from tqdm import tqdm
 from ..fileio import atomic_write
 from ..paths import DEMOS_DIR, REPO_DIR
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
-from .config import PRESETS, RECIPES, VARIANTS, DPConfig, make_config, parse_override
+from .config import (
+    PRESETS,
+    RECIPES,
+    VARIANTS,
+    DPConfig,
+    make_config,
+    parse_override,
+    recipe_config,
+)
 from .dataset import DemoWindows, data_key, load_windows
 from .model import DiffusionPolicyModel, noise_scheduler
 
@@ -157,7 +165,7 @@ class Training:
                 "tactile_model": TACTILE_MODEL_VERSION if self.cfg.tactile else None,
                 "episodes": windows.episodes, "samples": len(windows),
                 "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s,
-                "data_key": windows.key}
+                "data_key": windows.key, "data_cache": None if windows.cache is None else str(windows.cache.resolve())}
 
 
 def save(path: Path, obj: dict) -> None:
@@ -238,6 +246,9 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
         check_same_run(ckpt, cfg, ckpt_path, data_key(cfg, demos_root))
         if ckpt["step"] == ckpt["steps"] and policy_path.exists():
             return policy_path  # finished: nothing to do, and policy.pt is not written again
+    if (out / "data_cache.npz").exists():
+        print(f"note: {out / 'data_cache.npz'} is an older version's data cache, no longer read; delete it "
+              f"({(out / 'data_cache.npz').stat().st_size / 2 ** 30:.1f} GB)")
     windows = load_windows(cfg, demos_root, out / CACHE if cache is None else cache)
     steps = total_steps(cfg, len(windows))
     if ckpt is not None:
@@ -280,8 +291,11 @@ def main(argv=None) -> Path:
                     help="also keep the policy of every N-th step (snapshots/), for curves against training time")
     args = ap.parse_args(argv)
     try:
-        recipe = RECIPES[args.recipe] if args.recipe else {}
-        cfg = make_config(args.variant, args.config, **{**recipe, **dict(parse_override(s) for s in args.set)})
+        if args.recipe and args.config != "cpu":
+            raise ValueError(f"--recipe {args.recipe} varies the cpu preset; with --config {args.config} use --set")
+        overrides = dict(parse_override(s) for s in args.set)
+        cfg = (recipe_config(args.variant, args.recipe, overrides) if args.recipe else
+               make_config(args.variant, args.config, **overrides))
     except ValueError as e:
         ap.error(str(e))
     out = args.out or default_out(cfg, args.recipe)

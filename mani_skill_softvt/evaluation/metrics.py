@@ -42,6 +42,16 @@ def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tup
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
+def percent(x: float | None, digits: int = 1) -> str:
+    """A rate as a percentage for reports; "-" for none."""
+    return "-" if x is None else f"{100 * x:.{digits}f}"
+
+
+def percent_ci(x: float, ci: tuple[float, float] | None, digits: int = 1) -> str:
+    """``x [lo, hi]`` in percent; "- (no successes)" where the interval is undefined (None)."""
+    return "- (no successes)" if ci is None else f"{percent(x, digits)} [{percent(ci[0], digits)}, {percent(ci[1], digits)}]"
+
+
 def tolerance_violated(record: dict) -> bool:
     """The episode deformed its object beyond tolerance: R_max > 1, or the FEM blew up
     (``sim_unstable``: crushed or torn, whatever R_max was before)."""

@@ -8,18 +8,12 @@ import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
 from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
-from .metrics import group_summaries, summarize
-
-
-def _pct(x: float) -> str:
-    return f"{100 * x:.1f}"
+from .metrics import group_summaries, percent, percent_ci, summarize
 
 
 def _row(label: str, s: dict) -> str:
-    lo_t, hi_t = s["tsr_ci95"]
-    lo_d, hi_d = s["dsr_ci95"]
-    return (f"| {label} | {s['episodes']} | {_pct(s['tsr'])} [{_pct(lo_t)}, {_pct(hi_t)}] | "
-            f"{_pct(s['dsr'])} [{_pct(lo_d)}, {_pct(hi_d)}] | {_pct(s['gap'])} | {_pct(s['gap_share_of_successes'])} | "
+    return (f"| {label} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} | "
+            f"{percent_ci(s['dsr'], s['dsr_ci95'])} | {percent(s['gap'])} | {percent(s['gap_share_of_successes'])} | "
             f"{s['r_max_median']:.3f} |")
 
 

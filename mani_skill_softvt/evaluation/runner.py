@@ -210,6 +210,9 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
     from .wrapper import make_env
 
     policy = load_policy(policy_spec)
+    if policy_sha256 is not None and policy_file_sha256(policy_spec) != policy_sha256:
+        raise ValueError(f"{policy_spec} changed while the evaluation started (its SHA-256 is not the one its records "
+                         "will carry); evaluate again once it is no longer being written")
 
     def build():
         return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
@@ -237,7 +240,7 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
     The cameras render at ``camera_size`` (height, width), by default the size the policy asks for
     (:func:`~mani_skill_softvt.evaluation.policies.policy_camera_size`; 224x224 if none); asking a
     policy that says another size is an error. Only records of the same configuration (policy,
-    obs mode, control mode, camera size) count as done.
+    obs mode, control mode, camera size, and the policy file's SHA-256) count as done.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
@@ -314,9 +317,27 @@ def record_differences(stored: dict, new: dict) -> list[str]:
     return out
 
 
-def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=None) -> list[tuple[dict, list[str]]]:
+def relative_difference(a, b) -> float | None:
+    """The largest relative difference between two numbers or two equally long lists of numbers
+    (a field that differs only by rounding, on another machine, say); None for anything else."""
+    import numpy as np
+
+    if isinstance(a, (bool, str, dict)) or isinstance(b, (bool, str, dict)) or a is None or b is None:
+        return None
+    try:
+        x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if x.shape != y.shape or x.size == 0:
+        return None
+    return float(np.max(np.abs(x - y) / np.maximum(np.abs(y), np.finfo(float).tiny)))
+
+
+def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
+              progress=None) -> list[tuple[dict, dict | None, list[str]]]:
     """Run the first ``per_task`` recorded episodes of each task in ``path`` again (None: all), with
-    the configuration they were recorded with; (stored record, the fields that differ) each.
+    the configuration they were recorded with; (stored record, new record, the fields that differ)
+    each.
 
     Refuses before running anything if the file holds several runs, or if the policy file is not
     the one the records were made with (its ``policy_sha256``)."""
@@ -326,12 +347,14 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=N
     records = read_records(path)
     if not records:
         raise ValueError(f"{path}: no records to reproduce")
-    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS]) for r in records}
-    if len(runs) > 1:
-        raise ValueError(f"{path} holds records of {len(runs)} run configurations (policy, modes, camera size, policy "
-                         "file); reproduce a file of one run")
+    # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
+    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
+    hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
+    if len(runs) > 1 or len(hashes) > 1:
+        raise ValueError(f"{path} holds records of {max(len(runs), len(hashes))} run configurations (policy, modes, "
+                         "camera size, policy file); reproduce a file of one run")
     first = records[0]
-    spec, sha = first["policy"], first.get("policy_sha256")
+    spec, sha = first["policy"], next(iter(hashes), None)
     if sha is not None:
         if not Path(spec).is_file():
             raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
@@ -351,5 +374,6 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=N
                        Path(tmp) / "records.jsonl", workers, first["obs_mode"], first["control_mode"], progress=progress,
                        camera_size=tuple(size) if size else None)
     by_key = {episode_key(r): r for r in new}
-    return [(r, record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])
+    return [(r, by_key.get(episode_key(r)),
+             record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])
             for r in chosen]
