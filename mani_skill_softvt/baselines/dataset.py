@@ -301,6 +301,11 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: b
         for stale in [entry, *cache.glob(f".{key}.tmp-*")]:
             if stale.exists():
                 shutil.rmtree(stale)
+        others = [p for p in cache.iterdir() if p.is_dir() and not p.name.startswith(".") and p != entry]
+        if others:  # superseded entries (a grown demo set, another split) pile up: say so once per preparation
+            size = sum(f.stat().st_size for p in others for f in p.glob("*.npy")) / 2 ** 30
+            print(f"preparing {entry}; {len(others)} other entries in {cache} take {size:.1f} GB (each one's meta.json "
+                  "says what it holds; delete those no run reads)", file=sys.stderr, flush=True)
         tmp = cache / f".{key}.tmp-{os.getpid()}"
         try:
             windows = prepare(cfg, demos_root, heldout, into=tmp)
