@@ -444,6 +444,16 @@ def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(t
     # Another held-out split (or an edited recipe) is another run: its results never hide behind these.
     cfg = search.search_config("vo-c", "tiny", 1)
     assert search.run_id(cfg, "k") != search.run_id(search.search_config("vo-c", "tiny", 2), "k")
+    # A recipe that differs only in how it samples (exec4 of long) takes the other's weights, untrained.
+    monkeypatch.setitem(search.RECIPES, "tiny4", {**search.RECIPES["tiny"], "action_steps": 4})
+    search.main(argv + ["--recipes", "tiny", "tiny4"])
+    derived = tmp_path / "runs" / "vo-c" / "vo-c-tiny4"
+    assert not (derived / T.CHECKPOINT).exists() and [search.snapshot_step(p) for p in search.run_snapshots(derived)] == [2, 4, 6]
+    a = torch.load(tmp_path / "runs" / "vo-c" / "vo-c-tiny" / T.POLICY, weights_only=False)
+    b = torch.load(derived / T.POLICY, weights_only=False)
+    assert b["config"]["action_steps"] == 4 and all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+    rows4 = [r for r in search.measured("vo-c", tmp_path / "results").values() if r["recipe"] == "tiny4"]
+    assert sorted(r["step"] for r in rows4) == [2, 4, 6] and rows4[0]["run"] != rows[6]["run"]
     # --set names the run by the parsed values in key order; the search's own fields are refused.
     assert search.recipe_label("long", {"lr": 0.001, "camera_size": (96, 96)}) == "long+camera_size=96,96+lr=0.001"
     with pytest.raises(SystemExit):
@@ -657,3 +667,17 @@ def test_train_command_line_applies_recipes_to_the_cpu_preset_only(tmp_path):
         T.main(["--variant", "vo-c", "--config", "paper", "--recipe", "long", "--demos", str(tmp_path)])
     assert T.default_out(make_config("vo-c"), "long").name == "vo-c-cpu-long"
     assert T.default_out(make_config("vo-c", "paper"), None).name == "vo-c-paper"
+
+
+def test_inference_fields_do_not_change_training(tmp_path):
+    # What the recipe search relies on to derive exec4 from long without training it again.
+    from mani_skill_softvt.baselines.config import INFERENCE_FIELDS, training_identity
+
+    _write_demos(tmp_path / "demos")
+    cfg = make_config("vo-c", **TINY)
+    other = make_config("vo-c", **{**TINY, "action_steps": 4, "inference_timesteps": 2, "inference_scheduler": "ddpm"})
+    assert set(INFERENCE_FIELDS) == {"action_steps", "inference_timesteps", "inference_scheduler"}
+    assert training_identity(cfg) == training_identity(other) != training_identity(make_config("vo-c", **{**TINY, "lr": 1}))
+    a = torch.load(T.train(cfg, tmp_path / "demos", tmp_path / "a", progress=False), weights_only=False)
+    b = torch.load(T.train(other, tmp_path / "demos", tmp_path / "b", progress=False), weights_only=False)
+    assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])

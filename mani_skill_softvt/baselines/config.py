@@ -162,6 +162,18 @@ RECIPES: dict[str, dict] = {
     "exec4": {"steps": 12000, "action_steps": 4},
 }
 
+# Fields that change how a trained network is sampled, not how it trains: runs that differ only in
+# these learn the same weights, bit for bit (the recipe search trains one and derives the others).
+INFERENCE_FIELDS = ("action_steps", "inference_timesteps", "inference_scheduler")
+
+
+def training_identity(cfg: DPConfig) -> str:
+    """The config without its inference fields, as text: equal for runs that train alike."""
+    import json
+
+    return json.dumps({k: v for k, v in cfg.to_dict().items() if k not in INFERENCE_FIELDS}, sort_keys=True, default=list)
+
+
 def recipe_config(variant: str, recipe: str = "base", overrides: dict | None = None, **extra) -> DPConfig:
     """The cpu preset of ``variant`` with the named recipe's overrides (:data:`RECIPES`), then
     ``overrides`` (``--set``), then ``extra``."""

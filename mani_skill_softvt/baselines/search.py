@@ -15,7 +15,9 @@ out; it keeps a snapshot policy every ``--snapshot-every`` steps. Every snapshot
 error (:mod:`.openloop`) and training time become a line of ``baselines/search/<variant>.jsonl``
 (committed: the table survives the machine), so each recipe yields a curve of error against
 training time. The runs share one prepared-data cache (``<runs>/data_cache``): recipes that read
-the demos the same way read one copy.
+the demos the same way read one copy. A recipe that differs from one trained earlier in the same
+command only in how the network is sampled (:data:`~.config.INFERENCE_FIELDS`: ``exec4`` of
+``long``) is not trained again: its snapshots are the other's weights with its own config.
 
 ``--closed-loop N`` trains nothing: it evaluates the runs' snapshots (those of ``--steps``, default
 all) on the ID protocol, N episodes per task, with ``--workers`` processes, into
@@ -35,7 +37,7 @@ from pathlib import Path
 from ..evaluation.metrics import percent_ci
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import DEMOS_DIR, REPO_DIR
-from .config import RECIPES, VARIANTS, parse_override, recipe_config
+from .config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
@@ -98,14 +100,14 @@ def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Pat
                       threads: int, cache: Path | None = None) -> list[dict]:
     """Log the open-loop error of every snapshot of the run of ``cfg`` in ``run`` not yet logged;
     the new lines. The run's data is read once for all its snapshots."""
+    from .agent import read_policy_file
     from .openloop import load_run_windows, openloop
-    from .train import CHECKPOINT, load_checkpoint
 
     done = measured(variant, results_dir)
     todo = run_snapshots(run)
     if not todo:
         return []
-    identity = run_id(cfg, load_checkpoint(run / CHECKPOINT).get("data_key", ""))
+    identity = run_id(cfg, read_policy_file(todo[0])[1].get("data_key", ""))
     todo = [s for s in todo if (identity, snapshot_step(s)) not in done]
     data = load_run_windows(cfg, run, demos_root, cache) if todo else None
     new = []
@@ -118,6 +120,28 @@ def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Pat
         append_jsonl(results_path(variant, results_dir), line)
         new.append(line)
     return new
+
+
+def derive_snapshots(source: Path, run: Path, cfg) -> int:
+    """Give ``run`` the snapshots (and ``policy.pt``) of ``source``, a run whose config differs from
+    ``cfg`` only in :data:`~.config.INFERENCE_FIELDS`: the same weights, sampled as ``cfg`` says.
+    Training it would give those weights bit for bit; this costs seconds. Returns how many files
+    were written (those already there are kept)."""
+    from .agent import read_policy_file
+    from .train import POLICY, save, snapshot_path
+
+    snaps = run_snapshots(source)
+    if snaps and training_identity(read_policy_file(snaps[0])[0]) != training_identity(cfg):
+        raise ValueError(f"{source} trains otherwise than {run} would; it cannot stand in for it")
+    pairs = [(snap, snapshot_path(run, snapshot_step(snap))) for snap in snaps]
+    pairs += [(source / POLICY, run / POLICY)] if (source / POLICY).exists() else []
+    written = 0
+    for src, dest in pairs:
+        if not dest.exists():
+            ckpt = read_policy_file(src)[1]
+            save(dest, {**ckpt, "config": cfg.to_dict(), "derived_from": str(src)})
+            written += 1
+    return written
 
 
 def closed_loop_dir(results_dir: Path, run: str) -> Path:
@@ -288,13 +312,21 @@ def main(argv=None) -> str:
         return _report(args.variant, args.results)
     cache = args.runs / "data_cache"  # shared: recipes that read the demos alike read one copy
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
+    trained: dict[str, Path] = {}  # training_identity -> the run of this invocation that trains so
     for recipe in args.recipes:
         if deadline is not None and time.monotonic() >= deadline:
             print(f"the time budget ran out before {recipe}; run the same command again to continue")
             break
         label, run = labels[recipe], runs[recipe]  # its records and snapshots say both
-        policy = train(configs[recipe], args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every,
-                       cache=cache)
+        source = trained.get(training_identity(configs[recipe]))
+        if source is not None:  # the same training, sampled otherwise (exec4 of long): no second run
+            derive_snapshots(source, run, configs[recipe])
+            policy = run / "policy.pt"
+            print(f"{label}: the weights of {source.name} (the recipes differ in how they sample only)")
+        else:
+            policy = train(configs[recipe], args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every,
+                           cache=cache)
+            trained[training_identity(configs[recipe])] = run
         for line in measure_snapshots(args.variant, label, run, configs[recipe], args.demos, args.results, args.windows,
                                       args.threads, cache):
             print(f"{label} step {line['step']}: held-out {line['heldout']['position_mm_mean']:.1f} mm, "
