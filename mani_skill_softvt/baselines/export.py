@@ -35,11 +35,11 @@ def half_state(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return {k: v.half() if v.is_floating_point() and not k.startswith(KEEP_FLOAT32) else v for k, v in state.items()}
 
 
-def exported(source: Path) -> dict:
-    """The exported policy file's content for the ``policy.pt`` (or snapshot) ``source``."""
+def exported(source: Path, source_sha256: str) -> dict:
+    """The exported policy file's content for the ``policy.pt`` (or snapshot) ``source``, whose
+    file hashes to ``source_sha256``."""
     _, ckpt = read_policy_file(source)
-    return {**ckpt, "model": half_state(ckpt["model"]), "weights_dtype": "float16",
-            "exported_from": policy_file_sha256(str(source))}
+    return {**ckpt, "model": half_state(ckpt["model"]), "weights_dtype": "float16", "exported_from": source_sha256}
 
 
 def export(source: Path, dest: Path, max_mib: float = MAX_MIB, if_changed: bool = False) -> bool:
@@ -48,12 +48,11 @@ def export(source: Path, dest: Path, max_mib: float = MAX_MIB, if_changed: bool 
     source, dest = Path(source), Path(dest)
     if not dest.name.endswith(".pt") or dest.name == "policy.pt":
         raise ValueError(f"{dest}: name the export <variant>-<recipe>.pt (its records are named after the file)")
-    if if_changed and dest.exists():
-        previous = load_checkpoint(dest)
-        if previous.get("exported_from") == policy_file_sha256(str(source)):
-            return False
+    sha = policy_file_sha256(str(source)) if source.is_file() else None  # a missing file: read_policy_file says so
+    if if_changed and dest.exists() and load_checkpoint(dest).get("exported_from") == sha:
+        return False
     buffer = io.BytesIO()
-    torch.save(exported(source), buffer)
+    torch.save(exported(source, sha), buffer)
     size = buffer.tell() / 2 ** 20
     if size > max_mib:
         raise ValueError(f"{source}: exported in float16 it takes {size:.1f} MiB, over the {max_mib:g} MiB a committed "

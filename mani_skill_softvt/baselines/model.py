@@ -83,10 +83,7 @@ class DiffusionPolicyModel(nn.Module):
         """The autocast context of the config's precision (a no-op for fp32)."""
         if self.cfg.precision != "bf16":
             return contextlib.nullcontext()
-        return torch.autocast(device_type=self.scale_device().type, dtype=torch.bfloat16)
-
-    def scale_device(self) -> torch.device:
-        return self.normalize["action"].scale.device
+        return torch.autocast(device_type=self.normalize["action"].scale.device.type, dtype=torch.bfloat16)
 
     def denoise(self, sample: torch.Tensor, step: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """The U-Net's noise prediction, float32 whatever the precision."""

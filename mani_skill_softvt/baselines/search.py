@@ -160,12 +160,13 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
     from ..evaluation.runner import evaluate
     from .agent import read_policy_file, required_modes
 
-    if not run_snapshots(run):
+    every = run_snapshots(run)
+    if not every:
         raise ValueError(f"{run} has no snapshots to evaluate; train it first (the same command without --closed-loop)")
-    snaps = [s for s in run_snapshots(run) if steps is None or snapshot_step(s) in steps]
+    snaps = [s for s in every if steps is None or snapshot_step(s) in steps]
     missing = sorted(set(steps or ()) - {snapshot_step(s) for s in snaps})
     if missing:
-        raise ValueError(f"{run}: no snapshots of steps {missing} (it has {[snapshot_step(s) for s in run_snapshots(run)]}); "
+        raise ValueError(f"{run}: no snapshots of steps {missing} (it has {[snapshot_step(s) for s in every]}); "
                          "train further, or pick others with --steps")
     eps = episodes(suite, "id", tasks, per_task)
     for snap in snaps:
@@ -194,11 +195,12 @@ def closed_loop_summaries(results_dir: Path = RESULTS_DIR) -> dict[tuple[str, in
     return out
 
 
-def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
+def format_table(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | None = None) -> str:
     """The logged results, one row per (recipe, step), by recipe then step; closed-loop TSR and
-    DSR (95 % Wilson intervals) where the snapshot was evaluated."""
+    DSR (95 % Wilson intervals) where the snapshot was evaluated (``closed``: the
+    :func:`closed_loop_summaries`, when the caller has them)."""
     rows = sorted(measured(variant, results_dir).values(), key=lambda r: (r["recipe"], r["run"], r["step"]))
-    closed = closed_loop_summaries(results_dir)
+    closed = closed_loop_summaries(results_dir) if closed is None else closed
     head = ("| recipe (run) | demos trained / held out | step | training min | held-out pos mm | 1st action mm | rot deg "
             "| gripper | training pos mm | closed-loop episodes | TSR % [95% CI] | DSR % [95% CI] |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     title = (f"{variant}: open-loop error of the executed actions at every replanning step; closed-loop TSR and DSR "
@@ -214,7 +216,7 @@ def format_table(variant: str, results_dir: Path = RESULTS_DIR) -> str:
     return "\n".join(lines)
 
 
-def plot_curves(variant: str, results_dir: Path = RESULTS_DIR) -> Path | None:
+def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | None = None) -> Path | None:
     """``<results>/<variant>.png``: held-out open-loop error and closed-loop TSR against training
     time, one line per run; None when nothing is logged."""
     rows = list(measured(variant, results_dir).values())
@@ -227,7 +229,7 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR) -> Path | None:
 
     from ..fileio import atomic_write
 
-    closed = closed_loop_summaries(results_dir)
+    closed = closed_loop_summaries(results_dir) if closed is None else closed
     fig, (ax_err, ax_tsr) = plt.subplots(1, 2, figsize=(11, 4))
     for run in sorted({r["run"] for r in rows}):
         mine = sorted((r for r in rows if r["run"] == run), key=lambda r: r["step"])
@@ -339,8 +341,9 @@ def main(argv=None) -> str:
 
 def _report(variant: str, results_dir: Path) -> str:
     """Print the table and redraw the curves (``<results>/<variant>.png``)."""
-    table = format_table(variant, results_dir)
-    plot_curves(variant, results_dir)
+    closed = closed_loop_summaries(results_dir)  # every record verified once, for the table and the plot
+    table = format_table(variant, results_dir, closed)
+    plot_curves(variant, results_dir, closed)
     print(table)
     return table
 
