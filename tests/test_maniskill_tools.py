@@ -171,13 +171,23 @@ def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mo
             assert f["traj_0/obs/tactile/left/rgb"].shape == (4, 240, 320, 3)
 
 
+@pytest.fixture(scope="module")
+def soft_demo(tmp_path_factory) -> Path:
+    """The soft sample's episode (task 3, its first training seed) recorded again on this machine by
+    the package's generator. Bit-for-bit replay holds on the machine that recorded: across machine
+    instances the FEM rounds differently and contact amplifies it (docs/demos.md), so the committed
+    sample is the reference only for what survives that (test below)."""
+    out = tmp_path_factory.mktemp("soft")
+    _run("mani_skill_softvt.demos", "generate", "--suite", "object_soft", "--tasks", str(TASK), "--num", "1",
+         "--out", str(out))
+    return out / "object_soft" / f"task{TASK}.h5"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("flags,obs_mode", [((), "state"), (("--use-env-states",), "state"),
                                             (("--use-env-states",), "rgb+tactile")])
-def test_maniskill_replay_of_the_soft_sample_reproduces_the_fem_state_bit_for_bit(tmp_path, flags, obs_mode):
-    from mani_skill_softvt.paths import REPO_DIR
-
-    src = _copy(REPO_DIR / "demos" / "sample" / "object_soft" / "task3.h5", tmp_path)
+def test_maniskill_replay_of_a_soft_demo_reproduces_the_fem_state_bit_for_bit(soft_demo, tmp_path, flags, obs_mode):
+    src = _copy(soft_demo, tmp_path)
     _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), *flags, "-o", obs_mode, "--save-traj")
     dst = tmp_path / f"{src.stem}.{obs_mode}.pd_ee_pose.physx_cpu.h5"
     with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
@@ -190,6 +200,20 @@ def test_maniskill_replay_of_the_soft_sample_reproduces_the_fem_state_bit_for_bi
             t = a["traj_0/actions"].shape[0]
             assert b["traj_0/obs/tactile/left/depth"].shape == (t + 1, 240, 320)
             assert b["traj_0/obs/tactile/left/depth"][()].max() > 0  # the soft object pressed the gel
+
+
+@pytest.mark.slow
+def test_the_committed_soft_sample_replays_to_success_on_any_machine(soft_demo, tmp_path):
+    from mani_skill_softvt.paths import REPO_DIR
+
+    src = _copy(REPO_DIR / "demos" / "sample" / "object_soft" / f"task{TASK}.h5", tmp_path)
+    _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), "-o", "state", "--save-traj")
+    with h5py.File(src, "r") as a, h5py.File(tmp_path / f"{src.stem}.state.pd_ee_pose.physx_cpu.h5", "r") as b, \
+            h5py.File(soft_demo, "r") as c:
+        assert b["traj_0/success"][-1]
+        # The same episode: the generator drew the same seed and the expert took as many steps.
+        assert a["traj_0"].attrs["seed"] == c["traj_0"].attrs["seed"]
+        assert a["traj_0/actions"].shape == c["traj_0/actions"].shape
 
 
 @pytest.mark.slow
