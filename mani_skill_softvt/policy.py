@@ -8,6 +8,15 @@ A policy that was trained on camera images of another size than the env's 224x22
 ``camera_size`` = (height, width): the evaluator renders its cameras at that size (ManiSkill's
 ``sensor_configs``), so it sees what it was trained on rather than a shrunken 224x224 image.
 
+A policy that plans from a window of recent frames need not see every step's camera images: it
+says so through ``needs_next_images()``, asked after each ``act``. When it returns False, the
+evaluator does not render the cameras of the step that follows, and that step's observation
+carries no camera images (``obs["sensor_data"]`` is empty; state, extra and tactile entries are
+as always). The observations of the steps inside a chunk of k > 1 actions reach no policy, so
+their cameras are never rendered. Rendering reads the scene and never changes it: the episode is
+the same bit for bit either way, minus the cameras' cost (a fifth of an evaluation step at 84 px,
+docs/benchmarks.md).
+
 A *privileged* policy (``privileged = True``: the scripted experts) plans on the simulator: the
 runner hands it the env through ``bind(env)`` before ``reset`` and labels its records so; it
 cannot be served over the network. Every other policy, in process or behind ``ws://``, never
@@ -38,6 +47,11 @@ class Policy:
 
     def act(self, obs) -> np.ndarray:
         raise NotImplementedError
+
+    def needs_next_images(self) -> bool:
+        """Whether the observation passed to the next ``act`` must carry camera images (asked
+        after each ``act``; by default always)."""
+        return True
 
 
 def is_privileged(policy) -> bool:

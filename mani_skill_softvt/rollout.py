@@ -91,13 +91,17 @@ def _episode_end(until: str, terminated, truncated, info) -> str | None:
 
 
 def rollout(env, policy, seed: int | None = None, *, options: dict | None = None, reset: bool = True,
-            replan_steps: int = 8, observers=(), until: str = "episode") -> Episode:
+            replan_steps: int = 8, observers=(), until: str = "episode", skip_unread_cameras: bool = False) -> Episode:
     """Run ``policy`` on ``env`` for one episode (module docstring).
 
     ``reset=False`` continues an env its caller has just reset (and ``seed`` is then only what
     the policy's ``reset`` is told). A policy that can finish (``done`` true: its plan or script
     is exhausted) ends ``"plan"`` and ``"script"`` rollouts as ``plan_end``; under ``"episode"``
     it is asked again.
+
+    ``skip_unread_cameras``: the cameras render only for the observations the policy reads: the
+    one after a chunk's last action, where the policy's ``needs_next_images()`` asks for it
+    (policy.py). For evaluators; observers then see observations without camera images.
     """
     from .physics.fem import SimulationInstabilityError
 
@@ -118,14 +122,19 @@ def rollout(env, policy, seed: int | None = None, *, options: dict | None = None
         ep.termination, ep.error, ep.exception, ep.failed_in = "policy_error", _error_text(e, "policy.reset()"), e, \
             "policy.reset()"
         return ep
+    skipping = skip_unread_cameras and hasattr(u, "skip_cameras_next_step")
     while ep.termination is None:
+        where = "policy.act()"
         try:
             actions = action_chunk(policy.act(obs), u, replan_steps)
+            where = "policy.needs_next_images()"
+            read_last = not skipping or bool(getattr(policy, "needs_next_images", lambda: True)())
         except Exception as e:  # noqa: BLE001
-            ep.termination, ep.error, ep.exception, ep.failed_in = "policy_error", _error_text(e, "policy.act()"), e, \
-                "policy.act()"
+            ep.termination, ep.error, ep.exception, ep.failed_in = "policy_error", _error_text(e, where), e, where
             break
-        for action in actions:
+        for i, action in enumerate(actions):
+            if skipping and (i < len(actions) - 1 or not read_last):
+                u.skip_cameras_next_step()
             try:
                 result = env.step(action)
             except SimulationInstabilityError as e:

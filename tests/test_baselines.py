@@ -505,6 +505,31 @@ def test_agent_replans_every_action_steps_and_is_deterministic(tmp_path, variant
             policy.act(_env_obs(np.random.default_rng(0), tactile=False))
 
 
+def test_agent_reads_only_the_frames_it_plans_from(tmp_path):
+    """The agent asks for camera images only for the last obs_horizon frames before each
+    replanning; given observations without images elsewhere, it acts exactly as with all of them."""
+    _write_demos(tmp_path / "demos")
+    policy = load_policy(str(T.train(make_config("vt-c", **TINY), tmp_path / "demos", tmp_path / "run", progress=False)))
+    h, k = policy.cfg.obs_horizon, policy.cfg.action_steps
+    assert (h, k) == (2, 8)
+    runs, asked = [], []
+    for blind in (False, True):
+        rng = np.random.default_rng(0)
+        policy.reset("pick", seed=5)
+        actions, wants = [], True
+        for _ in range(17):
+            obs = _env_obs(rng, tactile=True)
+            if blind and not wants:
+                obs["sensor_data"] = {}  # what the evaluator passes when it renders no camera
+            actions.append(policy.act(obs))
+            wants = policy.needs_next_images()
+            asked.append(wants) if blind else None
+        runs.append(np.concatenate(actions))
+    assert np.array_equal(runs[0], runs[1])
+    # The plans at calls 8 and 16 read the frames of calls 7, 8 and 15, 16, asked for by the calls before.
+    assert [i for i, a in enumerate(asked) if a] == [6, 7, 14, 15]
+
+
 def test_loading_a_policy_file_says_what_is_wrong(tmp_path):
     with pytest.raises(FileNotFoundError, match="missing.pt.*baselines.train"):
         load_policy(str(tmp_path / "missing.pt"))

@@ -243,3 +243,57 @@ def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
 
 def obs_before(env, side):
     return torch.from_numpy(env.unwrapped.tactile_background(side)[None])
+
+
+def test_cameras_render_only_for_the_observations_a_policy_reads():
+    """rollout(skip_unread_cameras=True), as the evaluator runs it: a chunk's inner steps and the
+    steps whose images the policy declines render no camera, and the episode is the same bit for
+    bit as with every camera rendered (rendering reads the scene, never changes it); the GelSights
+    capture every step either way."""
+    from mani_skill_softvt.policy import Policy
+    from mani_skill_softvt.rollout import Observer, rollout
+
+    class Chunks(Policy):  # chunks of 3 "hold still"; asks for images after every other call
+        def reset(self, instruction, seed):
+            self.calls, self.seen = 0, []
+
+        def act(self, obs):
+            self.seen.append(bool(obs["sensor_data"]))
+            self.calls += 1
+            return np.stack([self.hold] * 3)
+
+        def needs_next_images(self):
+            return self.calls % 2 == 0
+
+    class Watch(Observer):
+        def on_reset(self, env, obs, info):
+            self.cameras, self.tactile = [], []
+
+        def on_step(self, env, action, obs, info):
+            self.cameras.append(sorted(obs["sensor_data"]))
+            self.tactile.append({s: {k: v.clone() for k, v in t.items()} for s, t in obs["tactile"].items()})
+            return len(self.cameras) == 9
+
+    runs = []
+    for skip in (False, True):
+        env = gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="rgb+tactile")
+        env.reset(seed=0)
+        policy, watch = Chunks(), Watch()
+        policy.hold = _hold_still(env, closure=0.5)
+        ep = rollout(env, policy, seed=0, replan_steps=3, observers=[watch], skip_unread_cameras=skip)
+        assert ep.termination == "stopped" and ep.steps == 9
+        runs.append((policy.seen, watch, env.unwrapped.get_state_dict(), ep.obs))
+        env.close()
+    (seen_all, all_, state_all, _), (seen, skipped, state, last) = runs
+    assert seen_all == [True] * 3 and all(c == ["base_camera", "hand_camera"] for c in all_.cameras)
+    # Rendered: the reset's (call 1), and step 6, after call 2 asked for it; call 3 did not ask.
+    assert seen == [True, False, True]
+    assert [bool(c) for c in skipped.cameras] == [i == 6 for i in range(1, 10)]
+    for a, b in zip(all_.tactile, skipped.tactile):
+        for side in a:
+            for k in a[side]:
+                assert torch.equal(a[side][k], b[side][k]), (side, k)
+    flat = lambda d, p="": [x for k, v in d.items() for x in (flat(v, p + k + "/") if isinstance(v, dict) else [(p + k, v)])]  # noqa: E731
+    for (ka, va), (kb, vb) in zip(flat(state_all), flat(state)):
+        assert ka == kb and torch.equal(va, vb), ka
+    assert last["sensor_data"] == {} and last["agent"]["qpos"].shape == (1, 9)

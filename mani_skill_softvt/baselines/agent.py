@@ -2,7 +2,9 @@
 
 It sees every control step's observation (``act`` returns one action at a time, so the two
 observation frames it conditions on are consecutive steps, as in training) and replans every
-``action_steps`` steps: it denoises a 16-step chunk and executes its first 8. Its record names the
+``action_steps`` steps: it denoises a 16-step chunk and executes its first 8. Only the frames it
+will plan from are read (the last ``obs_horizon`` before each replanning): for the others,
+``needs_next_images`` tells the evaluator not to render the cameras (2 of every 8 steps render). Its record names the
 variant and its recipe (``diffusion_policy[vt-c,cpu,rgb+depth]``). The sampling noise is seeded by the episode seed, and torch
 runs on one thread here, so an episode is the same bit for bit on a re-run.
 """
@@ -109,13 +111,22 @@ class DiffusionPolicyAgent(Policy):
     def act(self, obs) -> np.ndarray:
         if not isinstance(obs, dict) or "sensor_data" not in obs:
             raise ValueError(f"{self.name} needs camera images: evaluate with --obs-mode {self.obs_mode}")
-        frame = frame_features(flatten_batch(obs), self.cfg)
-        if not self.history:  # the first step: its own previous frame, as in training
-            self.history.extend([frame] * (self.cfg.obs_horizon - 1))
-        self.history.append(frame)
+        if self._reads_frame():  # a frame that leaves the window before the next plan is not read
+            frame = frame_features(flatten_batch(obs), self.cfg)
+            if not self.history:  # the first step: its own previous frame, as in training
+                self.history.extend([frame] * (self.cfg.obs_horizon - 1))
+            self.history.append(frame)
         if not self.queue:
             self.queue = list(self._plan())
         return self.queue.pop(0)[None]
+
+    def _reads_frame(self) -> bool:
+        """Whether the frame of this call is among the last ``obs_horizon`` before the next plan
+        (the queue holds the actions left to send before it)."""
+        return len(self.queue) < self.cfg.obs_horizon
+
+    def needs_next_images(self) -> bool:
+        return self._reads_frame()
 
     def _plan(self) -> np.ndarray:
         window = {k: torch.from_numpy(np.stack([f[k] for f in self.history]))[None] for k in self.history[0]}

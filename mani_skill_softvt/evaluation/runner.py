@@ -169,8 +169,10 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     u = env.unwrapped
     options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
     t0 = time.perf_counter()
+    # Cameras render only where the policy reads them; a video (on_step) shows every step's.
     ep = rollout(env, policy, int(episode["seed"]), options=options, replan_steps=replan_steps,
-                 observers=[Callback()] if on_step is not None else [], until="episode")
+                 observers=[Callback()] if on_step is not None else [], until="episode",
+                 skip_unread_cameras=on_step is None)
     info = ep.info
     material = u.object_material(u.target_instance)
     e = material["youngs_modulus"]  # None for a rigid twin

@@ -79,6 +79,7 @@ class SoftBodyEnv(BaseEnv):
         self.objects: SceneObjects | None = None  # the scene's objects (soft or rigid twins), built with it
         self._x0: dict[str, np.ndarray] = {}
         self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
+        self._skip_cameras = False  # set for one step by skip_cameras_next_step()
         self.settle_info: dict = {}
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
@@ -133,6 +134,12 @@ class SoftBodyEnv(BaseEnv):
         return images
 
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        if self._skip_cameras:
+            # The GelSights still capture: their renderer remembers the contact onset that marker
+            # shear is measured from, so a frame skipped would change the frames after it.
+            for sensor in self._tactile.values() if self.tactile_enabled else ():
+                sensor.capture()
+            return {}
         if self._obs_mode != "none":
             return super()._get_obs_sensor_data(apply_texture_transforms)
         # Only render_mode="sensors"/"all" asks for sensor data in obs mode "none" (it observes
@@ -243,9 +250,20 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ stepping
     def step(self, action):
-        return super().step(self.validate_action(action))
+        try:
+            return super().step(self.validate_action(action))
+        finally:
+            self._skip_cameras = False
+
+    def skip_cameras_next_step(self) -> None:
+        """Render no camera for the next step: its observation's ``sensor_data`` is empty, every
+        other entry (the GelSights' too) is as always. For an evaluator whose policy will not read
+        those images (``Policy.needs_next_images``); rendering never changes the scene, so the
+        episode is the same bit for bit."""
+        self._skip_cameras = True
 
     def reset(self, seed=None, options=None):
+        self._skip_cameras = False
         unknown = sorted(set(options or {}) - RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; SoftVT envs take {sorted(RESET_OPTIONS)}")
