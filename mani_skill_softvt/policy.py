@@ -9,13 +9,14 @@ A policy that was trained on camera images of another size than the env's 224x22
 ``sensor_configs``), so it sees what it was trained on rather than a shrunken 224x224 image.
 
 A policy that plans from a window of recent frames need not see every step's camera images: it
-says so through ``needs_next_images()``, asked after each ``act``. When it returns False, the
-evaluator does not render the cameras of the step that follows, and that step's observation
-carries no camera images (``obs["sensor_data"]`` is empty; state, extra and tactile entries are
-as always). The observations of the steps inside a chunk of k > 1 actions reach no policy, so
-their cameras are never rendered. Rendering reads the scene and never changes it: the episode is
-the same bit for bit either way, minus the cameras' cost (a fifth of an evaluation step at 84 px,
-docs/benchmarks.md).
+says so through ``needs_next_images()``, which the evaluator asks after each ``act``. When it
+returns False, the evaluator does not render the cameras of the step that follows, and that
+step's observation carries no camera images (``obs["sensor_data"]`` is empty; state, extra and
+tactile entries are as always). In evaluation the observations of the steps inside a chunk of
+k > 1 actions reach no policy, so their cameras are not rendered either. Rendering reads the
+scene and never changes it: the episode is the same bit for bit either way, minus the cameras'
+cost (a fifth of an evaluation step at 84 px, docs/benchmarks.md). Episode videos render every
+step and do not ask. A policy served over ``ws://`` is always sent images.
 
 A *privileged* policy (``privileged = True``: the scripted experts) plans on the simulator: the
 runner hands it the env through ``bind(env)`` before ``reset`` and labels its records so; it

@@ -267,10 +267,11 @@ def test_cameras_render_only_for_the_observations_a_policy_reads():
 
     class Watch(Observer):
         def on_reset(self, env, obs, info):
-            self.cameras, self.tactile = [], []
+            self.cameras, self.images, self.tactile = [], [], []
 
         def on_step(self, env, action, obs, info):
             self.cameras.append(sorted(obs["sensor_data"]))
+            self.images.append({c: v["rgb"].clone() for c, v in obs["sensor_data"].items()})
             self.tactile.append({s: {k: v.clone() for k, v in t.items()} for s, t in obs["tactile"].items()})
             return len(self.cameras) == 9
 
@@ -283,17 +284,55 @@ def test_cameras_render_only_for_the_observations_a_policy_reads():
         ep = rollout(env, policy, seed=0, replan_steps=3, observers=[watch], skip_unread_cameras=skip)
         assert ep.termination == "stopped" and ep.steps == 9
         runs.append((policy.seen, watch, env.unwrapped.get_state_dict(), ep.obs))
+        if skip:  # a reset to given states and obs after a step without cameras still shows them
+            obs, _ = env.reset(options={"reset_to_env_states": {"env_states": runs[0][2], "obs": runs[0][3]}})
+            assert sorted(obs["sensor_data"]) == ["base_camera", "hand_camera"]
         env.close()
     (seen_all, all_, state_all, _), (seen, skipped, state, last) = runs
     assert seen_all == [True] * 3 and all(c == ["base_camera", "hand_camera"] for c in all_.cameras)
     # Rendered: the reset's (call 1), and step 6, after call 2 asked for it; call 3 did not ask.
     assert seen == [True, False, True]
     assert [bool(c) for c in skipped.cameras] == [i == 6 for i in range(1, 10)]
+    for c, image in skipped.images[5].items():  # step 6: the same picture as with every step rendered
+        assert torch.equal(image, all_.images[5][c]), c
     for a, b in zip(all_.tactile, skipped.tactile):
         for side in a:
             for k in a[side]:
                 assert torch.equal(a[side][k], b[side][k]), (side, k)
-    flat = lambda d, p="": [x for k, v in d.items() for x in (flat(v, p + k + "/") if isinstance(v, dict) else [(p + k, v)])]  # noqa: E731
+    flat = lambda d, p="": [x for k, v in d.items() for x in (flat(v, p + k + "/") if isinstance(v, dict) else [(p + k, v)])]
     for (ka, va), (kb, vb) in zip(flat(state_all), flat(state)):
         assert ka == kb and torch.equal(va, vb), ka
     assert last["sensor_data"] == {} and last["agent"]["qpos"].shape == (1, 9)
+
+
+@pytest.mark.slow
+def test_an_expert_episode_scores_the_same_with_the_unread_cameras_skipped():
+    """A whole soft-object episode with contact (the expert grasps, lifts and places the cube) whose
+    policy declines every other frame's images is the same record as with every camera rendered:
+    deformation trace, R_max, success, steps."""
+    from mani_skill_softvt.data.seeds import id_seed
+    from mani_skill_softvt.evaluation.policies import ScriptedExpertPolicy
+    from mani_skill_softvt.evaluation.runner import run_episode
+    from mani_skill_softvt.evaluation.wrapper import make_env
+
+    def blinking():  # the package's expert (only its own policies may plan on the env), declining every other frame
+        expert = ScriptedExpertPolicy()
+        calls = []
+        expert.needs_next_images = lambda: calls.append(1) or len(calls) % 2 == 0
+        return expert
+
+    episode = {"suite": "object_soft", "task_id": 3, "condition": "id", "seed": id_seed(3, 0)}
+    records, rendered, skips = [], [], []
+    for on_step in (lambda obs, info: rendered.append(bool(obs["sensor_data"])), None):
+        env = make_env("object_soft", 3, obs_mode="rgb+tactile", camera_size=(32, 32))
+        skip = env.unwrapped.skip_cameras_next_step
+        env.unwrapped.skip_cameras_next_step = lambda skip=skip: skips.append(1) or skip()
+        records.append(run_episode(env, blinking(), episode, on_step=on_step))
+        env.close()
+    drop = ("wall_s", "record_sha256")
+    full, skipped = ({k: v for k, v in r.items() if k not in drop} for r in records)
+    assert full["success"] and full["steps"] > 100 and full["r_max"] > 0.1  # it squeezed the cube
+    assert all(rendered)  # a video's run renders every step and does not ask
+    # The expert's chunks of 8 leave 7 unread, and it declines every other chunk's last.
+    assert len(skips) >= full["steps"] * 7 // 8
+    assert skipped == full

@@ -4,7 +4,8 @@ It sees every control step's observation (``act`` returns one action at a time, 
 observation frames it conditions on are consecutive steps, as in training) and replans every
 ``action_steps`` steps: it denoises a 16-step chunk and executes its first 8. Only the frames it
 will plan from are read (the last ``obs_horizon`` before each replanning): for the others,
-``needs_next_images`` tells the evaluator not to render the cameras (2 of every 8 steps render). Its record names the
+``needs_next_images`` tells the evaluator not to render the cameras (with the cpu preset's 2
+frames and 8 executed actions, 2 of every 8 steps render). Its record names the
 variant and its recipe (``diffusion_policy[vt-c,cpu,rgb+depth]``). The sampling noise is seeded by the episode seed, and torch
 runs on one thread here, so an episode is the same bit for bit on a re-run.
 """

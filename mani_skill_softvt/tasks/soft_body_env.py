@@ -267,6 +267,12 @@ class SoftBodyEnv(BaseEnv):
         unknown = sorted(set(options or {}) - RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; SoftVT envs take {sorted(RESET_OPTIONS)}")
+        given = (options or {}).get("reset_to_env_states", {})
+        if "obs" in given and self._last_obs is not None and "sensor_data" in self._last_obs \
+                and not self._last_obs["sensor_data"]:
+            # ManiSkill writes a given reset obs into the last step's structure, which a skipped
+            # step left without cameras: observe afresh instead.
+            options = {**options, "reset_to_env_states": {k: v for k, v in given.items() if k != "obs"}}
         return super().reset(seed=seed, options=options)
 
     def validate_action(self, action):
