@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import tempfile
@@ -54,6 +55,9 @@ def append_jsonl(path: Path, record: dict) -> None:
     # A writer killed mid-line leaves a torn last line: cut it off first, so that it neither
     # glues onto the new record nor stays behind as a corrupt line in the middle of the log.
     with open(path, "ab") as f:
+        # Exclusive while it checks the tail and writes: two processes logging to one file (the
+        # recipe search's parallel runs) must not take each other's half-written line for torn.
+        fcntl.flock(f, fcntl.LOCK_EX)
         size = f.seek(0, os.SEEK_END)
         if size and _last_byte(path) != b"\n":
             f.truncate(_torn_line_start(path))
