@@ -158,7 +158,8 @@ def rollout(env, policy, seed: int | None = None, *, options: dict | None = None
 class EvaluatorTrace(Observer):
     """The evaluator-side stream of an episode, in one format: per state (the reset's, if the
     rollout reset, then one per step) the instructed object's nodes, D_t, centroid and lowest
-    point, every object's centroid and R_t (if a DSR wrapper reports it); per step the grasp and
+    point, every object's centroid, the scene's collapsed tets, and R_t (if a DSR wrapper reports
+    it); per step the grasp and
     drop flags (False where the env does not report them), both pad forces, the jaw width and the
     TCP pose.
     Evaluator-only: it reads the env, never an observation.
@@ -166,7 +167,8 @@ class EvaluatorTrace(Observer):
     ``object_name``: the object followed (default: the instructed one, else the scene's first).
     """
 
-    STATE = ("nodes", "deformation", "object_centroid", "object_min_z", "object_centroids", "deformation_ratio")
+    STATE = ("nodes", "deformation", "object_centroid", "object_min_z", "object_centroids", "collapsed_tets",
+             "deformation_ratio")
     STEP = ("is_grasped", "dropped", "pad_force", "gripper_width", "tcp", "tcp_quat")
 
     def __init__(self, object_name: str | None = None):
@@ -189,6 +191,7 @@ class EvaluatorTrace(Observer):
         v["object_centroid"].append(nodes.mean(axis=0))
         v["object_min_z"].append(float(nodes[:, 2].min()))
         v["object_centroids"].append(np.stack([u.soft_nodes(n).mean(0) for n in u.object_names]))
+        v["collapsed_tets"].append(u.collapsed_tets())
         if "deformation_ratio" in info:
             v["deformation_ratio"].append(float(info["deformation_ratio"]))
         if step:

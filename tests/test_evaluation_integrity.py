@@ -2,7 +2,6 @@
 on; records are verified on resume and rescoring; a killed evaluator leaves no process behind."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -24,7 +23,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
 REPO = Path(__file__).resolve().parents[1]
 SPEC = "misbehaving_policies:Misbehaving"
-SHORT_EPISODE = 40  # steps: enough for the crush (blow-up at ~34 steps) and a quick timeout
+SHORT_EPISODE = 40  # steps: enough for the crush (tets collapse from step ~34) and a quick timeout
 
 
 @pytest.fixture(scope="module")
@@ -49,19 +48,39 @@ def _target_top(env, seed: int) -> np.ndarray:
     return np.array([*nodes[:, :2].mean(0), nodes[:, 2].max()])
 
 
-def test_crushing_is_scored_as_failure_and_violation_and_the_env_runs_on(cube_env):
+def test_crushing_is_scored_as_failure_and_violation_and_the_episode_runs_on(cube_env):
     ep = _episode(BEHAVIOURS.index("crush"))
     rec = run_episode(cube_env, Crusher(_target_top(cube_env, ep["seed"])), ep)
-    assert rec["termination"] == "sim_unstable" and "tets" in rec["error"]
+    # The closed jaws collapse tets under them: counted, and the FEM simulates on to the step limit.
+    assert rec["termination"] == "timeout" and rec["error"] is None and rec["steps"] == SHORT_EPISODE
+    assert 0 < rec["collapsed_steps"] <= rec["steps"] + 1
     assert not rec["success"] and not rec["dsr_success"] and tolerance_violated(rec)
-    # R_max up to the blow-up is kept: the peak of the recorded D_t trace over tau_o.
-    assert rec["steps"] > 0 and len(rec["deformation_trace"]) == rec["steps"] + 1
+    assert rec["r_max"] > 1.0  # the closed jaws driven 10 cm below its top: far past a grasp's tolerance
+    assert len(rec["deformation_trace"]) == rec["steps"] + 1
     assert rec["r_max"] == pytest.approx(max(rec["deformation_trace"]) / rec["tau_o"], rel=1e-12)
     assert rec["record_sha256"] == record_hash(rec)
+    # A record scored without the count (as older ones were) would not see the violation.
+    assert summarize([rec])["collapses"] == 1
+
+
+def test_a_blow_up_ends_the_episode_as_sim_unstable_and_the_env_runs_on(cube_env, monkeypatch):
+    """The evaluator's handling of a blow-up, provoked by lowering the speed limit of the health
+    check to 5 cm/s, which the crusher's pressed nodes exceed (nothing else changes)."""
+    from mani_skill_softvt.physics.fem import SoftBodyWorld
+
+    check = SoftBodyWorld.check_health
+    monkeypatch.setattr(SoftBodyWorld, "check_health", lambda self, max_speed=0.05: check(self, max_speed))
+    ep = _episode(BEHAVIOURS.index("crush"))
+    rec = run_episode(cube_env, Crusher(_target_top(cube_env, ep["seed"])), ep)
+    assert rec["termination"] == "sim_unstable" and "speed" in rec["error"]
+    assert 0 < rec["steps"] < SHORT_EPISODE and len(rec["deformation_trace"]) == rec["steps"] + 1
+    assert not rec["success"] and not rec["dsr_success"] and tolerance_violated(rec)
+    assert rec["r_max"] == pytest.approx(max(rec["deformation_trace"]) / rec["tau_o"], rel=1e-12)
+    monkeypatch.undo()
     # The same env resets cleanly after a blow-up: holding still until the step limit is a timeout.
     hold = run_episode(cube_env, HoldPolicy(), _episode(0))
     assert hold["termination"] == "timeout" and hold["steps"] == SHORT_EPISODE and not hold["success"]
-    assert hold["r_max"] < 0.1  # nothing touched the object: only settling
+    assert hold["r_max"] < 0.1 and hold["collapsed_steps"] == 0  # nothing touched the object: only settling
 
 
 def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_path, monkeypatch):
@@ -75,10 +94,11 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
     expected = {"raise_in_act": ("policy_error", "ZeroDivisionError in policy.act(): deliberate failure in act"),
                 "nan": ("policy_error", "NaN"), "wrong_shape": ("policy_error", "shape (6,)"),
                 "strings": ("policy_error", "must be numbers"), "kill_own_process": ("worker_died", "SIGKILL"),
-                "raise_in_reset": ("policy_error", "KeyError in policy.reset()"), "crush": ("sim_unstable", "tets")}
+                "raise_in_reset": ("policy_error", "KeyError in policy.reset()"), "crush": ("timeout", None)}
     for b, (termination, message) in expected.items():
         r = got[b]
-        assert r["termination"] == termination and message in r["error"], (b, r["termination"], r["error"])
+        assert r["termination"] == termination and (message is None) == (r["error"] is None), (b, r["termination"])
+        assert message is None or message in r["error"], (b, r["error"])
         assert not r["success"] and not r["dsr_success"]
         assert (r["policy"], r["obs_mode"], r["control_mode"]) == (SPEC, "state_dict", "pd_ee_pose")
         assert r["record_sha256"] == record_hash(r)
@@ -86,8 +106,9 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
     assert got["raise_in_act"]["steps"] == got["nan"]["steps"] == 2 and got["raise_in_reset"]["steps"] == 0
     assert got["kill_own_process"]["r_max"] is None  # nothing of a dead worker's episode survives
     s = summarize(records)
-    assert s["terminations"] == {"policy_error": 5, "sim_unstable": 1, "worker_died": 1}
-    assert s["tolerance_violations"] == 1 and s["tsr"] == s["dsr"] == 0.0
+    assert s["terminations"] == {"policy_error": 5, "timeout": 1, "worker_died": 1}
+    assert s["tolerance_violations"] == s["collapses"] == 1 and got["crush"]["collapsed_steps"] > 0
+    assert s["tsr"] == s["dsr"] == 0.0
 
     # Resume: nothing re-runs; every line is verified.
     ticks = []

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mani_skill_softvt.calibration.stats import gripper_envelope, slip_distance
-from mani_skill_softvt.evaluation.metrics import deformation_ratio, r_max, rescore_record, summarize, wilson_interval
+from mani_skill_softvt.evaluation.metrics import (collapsed, deformation_ratio, dsr_success, r_max, rescore_record, summarize,
+                                                  tolerance_violated, wilson_interval)
 from mani_skill_softvt.data.seeds import id_seed, train_seed
 from mani_skill_softvt.evaluation.protocols import episodes
 
@@ -48,6 +49,19 @@ def test_rescoring_at_the_original_tolerance_reproduces_the_dsr():
     assert summarize(same)["dsr"] == summarize(recs)["dsr"]
     looser = [rescore_record(r, 2 * r["tau_o"]) for r in recs]
     assert summarize(looser)["dsr"] == pytest.approx(2 / 3)
+
+
+def test_a_collapsed_tet_is_a_violation_whatever_r_max_says():
+    gentle = _rec(True, 0.5)
+    pressed = dict(_rec(True, 0.5), collapsed_steps=3)
+    assert dsr_success(True, 0.5) and not dsr_success(True, 0.5, collapsed=True)
+    assert not tolerance_violated(gentle) and tolerance_violated(pressed)
+    assert not collapsed(dict(gentle, collapsed_steps=0)) and not collapsed(dict(gentle, collapsed_steps=None))
+    s = summarize([gentle, pressed])
+    assert (s["tsr"], s["dsr"], s["collapses"], s["tolerance_violations"]) == (1.0, 0.5, 1, 1)
+    # Rescoring at any tolerance keeps the collapse a violation; the task success stays.
+    loose = rescore_record(pressed, tau_new=1.0)
+    assert loose["success"] and not loose["dsr_success"] and loose["r_max"] < 1
 
 
 def test_envelope_from_sweep_records():

@@ -24,7 +24,7 @@ from mani_skill_softvt.paths import REPO_DIR
 
 SAMPLE = REPO_DIR / "demos" / "sample"
 # Evaluator-only or privileged quantities: none may name an exported column, feature or stat.
-FORBIDDEN = ("node", "deform", "r_max", "ratio", "centroid", "object", "youngs", "young", "mass", "evaluator",
+FORBIDDEN = ("node", "deform", "collapse", "r_max", "ratio", "centroid", "object", "youngs", "young", "mass", "evaluator",
              "pad_force", "tau", "closure", "env_state", "soft", "grasped", "dropped", "fem", "seed")
 
 

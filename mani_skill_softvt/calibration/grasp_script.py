@@ -92,7 +92,9 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
     to its end); return per-step records (numpy arrays) from the evaluator trace.
 
     ``on_step(phase, i, n)`` is called after every control step; returning ``"stop"`` ends the
-    script early (e.g. a calibration trial whose object was not lifted).
+    script early (e.g. a calibration trial whose object was not lifted). A collapsed tet raises
+    :class:`~mani_skill_softvt.physics.fem.SimulationInstabilityError`: a grasp the calibration
+    measures must keep the mesh valid throughout (its peak D would not be trustworthy).
     """
     from ..rollout import EvaluatorTrace, Observer, rollout
 
@@ -110,6 +112,13 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
     if episode.exception is not None:
         raise episode.exception
     t = trace.arrays()
+    if t["collapsed_tets"].any():
+        from ..physics.constants import MIN_TET_VOLUME_RATIO
+        from ..physics.fem import SimulationInstabilityError
+
+        k = int(np.argmax(t["collapsed_tets"] > 0))
+        raise SimulationInstabilityError(f"{int(t['collapsed_tets'][k])} tets collapsed (volume <= {MIN_TET_VOLUME_RATIO} x "
+                                         f"rest) at state {k} of the grasp script on '{object_name}'")
     return {"phase": np.asarray([p for p, _, _ in phases]), "deformation": t["deformation"],
             "gripper_width": t["gripper_width"], "object_min_z": t["object_min_z"],
             "object_centroid": t["object_centroid"], "tcp": t["tcp"], "tcp_quat": t["tcp_quat"],

@@ -95,6 +95,9 @@ def screen(ep: dict) -> list[str]:
     r_max = float(np.max(ep["evaluator"]["deformation_ratio"]))
     if r_max > 1.0:
         problems.append(f"R_max {r_max:.3f} > 1")
+    collapsed = np.asarray(ep["evaluator"].get("collapsed_tets", 0))  # not in demos recorded before it was kept
+    if collapsed.any():
+        problems.append(f"a tet collapsed ({int(collapsed.max())} at most) in {int((collapsed > 0).sum())} states")
     return problems
 
 

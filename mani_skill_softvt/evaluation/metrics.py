@@ -2,6 +2,10 @@
 
 R_t = D_t / tau_o, R_max = max_t R_t; an episode counts for the Deformation-aware Success Rate
 when the task succeeded and R_max <= 1. TSR = mean(T), DSR = mean(T * [R_max <= 1]).
+
+One addition to the paper's criterion: an episode in which a tet of the object collapsed or
+inverted (``collapsed_steps`` > 0) violated its tolerance whatever R_max says. The mesh then no
+longer represents the local compression, so D_t cannot certify that the object was handled gently.
 """
 
 from __future__ import annotations
@@ -25,8 +29,15 @@ def r_max(r_trace) -> float:
     return float(r_trace.max()) if r_trace.size else 0.0
 
 
-def dsr_success(task_success: bool, r_max: float) -> bool:
-    return bool(task_success) and float(r_max) <= 1.0
+def dsr_success(task_success: bool, r_max: float, collapsed: bool = False) -> bool:
+    """The episode counts for DSR: task success, R_max <= 1 and no collapsed tet."""
+    return bool(task_success) and float(r_max) <= 1.0 and not collapsed
+
+
+def collapsed(record: dict) -> bool:
+    """A tet of the record's scene collapsed or inverted during the episode (older records, made
+    when a collapse ended the episode as ``sim_unstable``, have no count: none)."""
+    return bool(record.get("collapsed_steps") or 0)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -53,9 +64,9 @@ def percent_ci(x: float, ci: tuple[float, float] | None, digits: int = 1) -> str
 
 
 def tolerance_violated(record: dict) -> bool:
-    """The episode deformed its object beyond tolerance: R_max > 1, or the FEM blew up
-    (``sim_unstable``: crushed or torn, whatever R_max was before)."""
-    if record.get("termination") == "sim_unstable":
+    """The episode deformed its object beyond tolerance: R_max > 1, a tet collapsed
+    (:func:`collapsed`), or the FEM blew up (``sim_unstable``, whatever R_max was before)."""
+    if record.get("termination") == "sim_unstable" or collapsed(record):
         return True
     return record.get("r_max") is not None and float(record["r_max"]) > 1.0
 
@@ -69,7 +80,7 @@ def summarize(records: list[dict]) -> dict:
     """
     n = len(records)
     t = sum(bool(r["success"]) for r in records)
-    d = sum(bool(r.get("dsr_success", dsr_success(r["success"], r["r_max"]))) for r in records)
+    d = sum(bool(r.get("dsr_success", dsr_success(r["success"], r["r_max"], collapsed(r)))) for r in records)
     if d > t:
         raise AssertionError("DSR exceeds TSR: a deformation-aware success must be a task success")
     tsr, dsr = (t / n, d / n) if n else (0.0, 0.0)
@@ -85,6 +96,7 @@ def summarize(records: list[dict]) -> dict:
         "gap_share_ci95": wilson_interval(t - d, t) if t else None,  # None: no successes to share
         "r_max_median": float(np.median(measured)) if measured else float("nan"),
         "tolerance_violations": sum(tolerance_violated(r) for r in records),
+        "collapses": sum(collapsed(r) for r in records),
         "terminations": dict(sorted(terminations.items())),
     }
 
@@ -106,5 +118,5 @@ def rescore_record(record: dict, tau_new: float) -> dict:
         return dict(record, tau_o=tau_new)
     peak = r_max(deformation_ratio(record["deformation_trace"], tau_new))
     out = dict(record, tau_o=tau_new, r_max=peak)
-    out["dsr_success"] = dsr_success(record["success"], peak)
+    out["dsr_success"] = dsr_success(record["success"], peak, collapsed(record))
     return out

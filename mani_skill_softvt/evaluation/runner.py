@@ -5,12 +5,16 @@ Every episode ends in a record, whatever the policy does; its ``termination`` sa
 - ``success``: the task's success predicate held (the env ended the episode);
 - ``dropped``: the object fell (the env's failure predicate ended the episode);
 - ``timeout``: the step limit came first;
-- ``sim_unstable``: the FEM left its valid range (the object was crushed or torn). Scored as a
-  task failure and a tolerance violation; ``r_max`` is the peak up to the blow-up;
+- ``sim_unstable``: the FEM blew up (NaN, or nodes faster than 5 m/s). Scored as a task failure
+  and a tolerance violation; ``r_max`` is the peak up to the blow-up;
 - ``policy_error``: the policy raised, returned malformed actions (not numbers, wrong shape,
   NaN), or its server refused or dropped the connection; ``error`` holds the message;
 - ``worker_died``: the process running the episode died (out of memory, a crash in native
   code, a kill); ``error`` says how. Nothing of the episode survives, so ``r_max`` is ``None``.
+
+A tet of the object that collapses or inverts (a fingertip pressing one node, a crushing grip)
+does not end the episode: the FEM recovers from it. ``collapsed_steps`` counts the states with
+one, and any makes the episode a tolerance violation (:func:`~.metrics.collapsed`).
 
 Records go to a JSONL file, one line per finished episode, written by the main process only.
 Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``, and for a
@@ -76,11 +80,18 @@ def run_records(path: Path, policy: str, obs_mode: str, control_mode: str,
                 camera_size: tuple[int, int] | None = None, policy_sha256: str | None = None) -> dict[tuple, dict]:
     """The verified records of one run configuration in ``path``, by episode key (resume matches on
     the configuration: another policy, obs mode, control mode or camera size is another run, and
-    so is another policy file's content; records from before the hash was kept match on the rest)."""
+    so is another policy file's content; records from before the hash was kept match on the rest).
+    A ``sim_unstable`` record without ``collapsed_steps`` is not done: it was made when the first
+    collapsed tet ended an episode, which now runs on (a re-run appends its new record)."""
     config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
               "tactile_model": tactile_model(obs_mode), "camera_size": recorded_camera_size(obs_mode, camera_size)}
     return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())
-            and r.get("policy_sha256", policy_sha256) == policy_sha256}
+            and r.get("policy_sha256", policy_sha256) == policy_sha256 and not ended_by_a_collapse(r)}
+
+
+def ended_by_a_collapse(rec: dict) -> bool:
+    """A record from before collapsed tets were counted that may have ended at one (see run_records)."""
+    return rec.get("termination") == "sim_unstable" and "collapsed_steps" not in rec
 
 
 def policy_file_sha256(spec: str) -> str | None:
@@ -187,6 +198,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
            "termination": ep.termination, "error": ep.error,
            "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
            "dropped": info_bool(info, "dropped"), "steps": ep.steps, "r_max": float(env.r_max),
+           "collapsed_steps": int(env.collapsed_steps),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
     if policy_sha256 is not None:
@@ -199,7 +211,7 @@ def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) ->
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **config,
            "camera_size": recorded_camera_size(config["obs_mode"], config.get("camera_size")),
            "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
-           "steps": None, "r_max": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
+           "steps": None, "r_max": None, "collapsed_steps": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
            "receipt": {"package_version": __version__, "privileged": False}}
     if rec.get("policy_sha256", "") is None:
         del rec["policy_sha256"]  # kept only for policy files, as in run_episode

@@ -16,9 +16,11 @@ class DSRWrapper(gym.Wrapper):
     - ``deformation_ratio``: R_t = D_t / tau_o of the instructed object,
     - ``r_max``: max R_t so far this episode,
     - ``task_success``: the env's kinematic success,
-    - ``dsr_success``: task success with R_max <= 1, on every suite. Rigid twins are PhysX rigid
-      bodies, so their R_max is ~0 and DSR equals TSR there by physics (the paper's premise), not
-      by a special case.
+    - ``collapsed_tets``: tets of the scene's soft objects now collapsed or inverted
+      (``collapsed_steps`` counts the states with any this episode),
+    - ``dsr_success``: task success with R_max <= 1 and no collapse so far, on every suite. Rigid
+      twins are PhysX rigid bodies, so their R_max is ~0 and DSR equals TSR there by physics (the
+      paper's premise), not by a special case.
 
     tau_o comes from the env's calibration card (``env.unwrapped.calibration_card``: the task's
     soft asset's, rigid twins their soft asset's, loaded once per env), the card the expert draws
@@ -33,6 +35,7 @@ class DSRWrapper(gym.Wrapper):
         self.rigid = task.rigid  # recorded with each episode
         self.r_max = 0.0
         self.deformation_trace: list[float] = []
+        self.collapsed_steps = 0
 
     def _score(self, info: dict) -> dict:
         u = self.env.unwrapped
@@ -40,15 +43,17 @@ class DSRWrapper(gym.Wrapper):
         r = deformation_ratio(d, self.tau_o)
         self.r_max = max(self.r_max, r)
         self.deformation_trace.append(d)
+        collapsed = u.collapsed_tets()
+        self.collapsed_steps += collapsed > 0
         success = info_bool(info, "success")
         info = dict(info)
-        info.update(deformation_ratio=r, r_max=self.r_max, task_success=success,
-                    dsr_success=dsr_success(success, self.r_max))
+        info.update(deformation_ratio=r, r_max=self.r_max, task_success=success, collapsed_tets=collapsed,
+                    dsr_success=dsr_success(success, self.r_max, self.collapsed_steps > 0))
         return info
 
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
-        self.r_max, self.deformation_trace = 0.0, []
+        self.r_max, self.deformation_trace, self.collapsed_steps = 0.0, [], 0
         return obs, self._score(info)
 
     def step(self, action):

@@ -132,6 +132,10 @@ class SceneObjects:
     def node_velocities(self, name: str) -> np.ndarray:
         raise NotImplementedError
 
+    def collapsed_tets(self, name: str) -> int:
+        """Tets of ``name`` collapsed or inverted now (none in a rigid twin's evaluation mesh)."""
+        return 0
+
     def contact_wrenches(self, links: tuple[str, ...]) -> dict[str, np.ndarray]:
         """Last tick's wrench of the objects on the robot links ``links``: name -> [force,
         torque about the link frame origin], world frame."""
@@ -374,6 +378,9 @@ class FEMObjects(SceneObjects):
 
     def node_velocities(self, name: str) -> np.ndarray:
         return self.world.particle_qd(self.index[name])
+
+    def collapsed_tets(self, name: str) -> int:
+        return self.world.collapsed_tets(self.index[name])
 
     def contact_wrenches(self, links: tuple[str, ...]) -> dict[str, np.ndarray]:
         return {name: self.coupling.wrench(name) for name in links}

@@ -21,7 +21,8 @@ of the scene (:meth:`SoftBodyEnv._load_props`) and place things per episode
   pads, inertia and colliders live in :mod:`.fingers`;
 - a GelSight Mini on each finger, a ManiSkill sensor configured like the cameras
   (:attr:`SoftBodyEnv._default_tactile_configs`), observed in ``+tactile`` obs modes;
-- instability detection (NaN, inverted tets, exploding velocities) after every control step.
+- blow-up detection (NaN, exploding velocities) after every control step; collapsed tets are
+  counted for the evaluator (``collapsed_tets``), not raised.
 
 Evaluator-only state (FEM nodes, object poses, deformation, material parameters) is exposed
 through cheap public accessors (:meth:`soft_nodes`, :meth:`settled_nodes`, :meth:`pad_forces`, ...)
@@ -457,6 +458,12 @@ class SoftBodyEnv(BaseEnv):
     def deformation(self, name: str | None = None) -> float:
         """D_t of a soft object against its settled nodes x_0. Evaluator-only."""
         return deformation(self.soft_nodes(name), self.settled_nodes(name))
+
+    def collapsed_tets(self) -> int:
+        """Tets of the scene's soft objects now collapsed or inverted (volume <= 2 % of rest; 0 for
+        rigid twins). A concentrated load does it, e.g. a fingertip edge pressing one surface node
+        (docs/limitations.md); the FEM recovers, and the evaluator scores it. Evaluator-only."""
+        return sum(self.objects.collapsed_tets(name) for name in self.object_names)
 
     def pad_wrenches(self) -> dict[str, np.ndarray]:
         """Last tick's contact wrench of the objects on each finger pad and on the hand:
