@@ -8,8 +8,9 @@ the receipt (``diffusion_policy[vo-c,cpu]``, ...: variant and recipe) and, for t
 files, by the file (its name and, where two files of one name were scored, its SHA-256), and writes ``<out>/results.md`` and ``.json``: per
 variant the episode count, TSR and DSR with 95 % Wilson intervals, the gap TSR - DSR (successes
 that left the calibrated tolerance) and its share of the successes, how episodes ended, how many
-episodes of any ending squeezed the object past its tolerance (R_max > 1, or crushed until the
-FEM blew up: harm that TSR - DSR cannot show when a policy never succeeds), and the paper's
+episodes of any ending squeezed the object past its tolerance (R_max > 1, a collapsed tet, or a
+blown-up FEM: harm that TSR - DSR cannot show when a policy never succeeds) and in how many a tet
+collapsed, and the paper's
 numbers for the same configuration. Records given with ``--legacy`` (made under an older physics
 or sensor) are rows of their own, marked ``[old physics]``, never pooled with today's.
 """
@@ -82,11 +83,12 @@ def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
                      f"| {percent_ci(s['dsr'], s['dsr_ci95'])} | {percent_ci(s['gap'], s['gap_ci95'])} "
                      f"| {percent_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
                      f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
-    columns = (*ENDINGS, "past tolerance (R_max > 1 or crushed), any end", "median R_max")
+    columns = (*ENDINGS, "past tolerance (R_max > 1, collapsed or blown up), any end", "a tet collapsed", "median R_max")
     lines += ["", "| variant | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for key, s in data.items():
         ends = [str(s["terminations"].get(k, 0)) for k in ENDINGS]
-        lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['r_max_median']:.3f} |")
+        lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['collapses']} "
+                     f"| {s['r_max_median']:.3f} |")
     return "\n".join(lines) + "\n", data
 
 

@@ -25,10 +25,11 @@ def _termination_table(per_suite: dict) -> list[str]:
     from .runner import TERMINATIONS
 
     cols = list(TERMINATIONS) + sorted({k for s in per_suite.values() for k in s["terminations"]} - set(TERMINATIONS))
-    lines = ["| group | " + " | ".join(cols) + " | tolerance violations |", "|---" * (len(cols) + 2) + "|"]
+    lines = ["| group | " + " | ".join(cols) + " | tolerance violations | of them a tet collapsed |",
+             "|---" * (len(cols) + 3) + "|"]
     for label, s in per_suite.items():
         counts = [str(s["terminations"].get(c, 0)) for c in cols]
-        lines.append(f"| {label} | " + " | ".join(counts) + f" | {s['tolerance_violations']} |")
+        lines.append(f"| {label} | " + " | ".join(counts) + f" | {s['tolerance_violations']} | {s['collapses']} |")
     return lines
 
 
