@@ -10,7 +10,7 @@
 
 ``generate`` runs the scripted expert once per episode (training seeds, disjoint from the ID
 evaluation seeds; both ranges go to ``manifest.json``), screens every episode (stream lengths,
-NaN, success, no drop, R_max <= 1), keeps a QC log of what was rejected and why, and packs the
+NaN, success, no drop, R_max <= 1, no collapsed tet), keeps a QC log of what was rejected and why, and packs the
 accepted episodes per task into ``<suite>/task<k>.h5`` + ``.json`` (ManiSkill's trajectory format,
 ``source_type="motionplanning"``). Re-running skips episodes already recorded. Where each file
 lives: :class:`~mani_skill_softvt.data.demo_set.DemoSet`.

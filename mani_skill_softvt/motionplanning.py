@@ -100,7 +100,8 @@ def _run(args, first: int, stride: int, count: int, traj_name: str, queue) -> st
         except Exception as e:  # noqa: BLE001  (an episode's failure is a result, as in ManiSkill's runner)
             print(f"seed {seed}: no valid solution: {e}")
             res = -1
-        success = res != -1 and info_bool(res[-1], "success")
+        # A collapsed tet makes a demo unusable, as a crash of the episode once did (docs/evaluation.md).
+        success = res != -1 and info_bool(res[-1], "success") and not env.get_wrapper_attr("collapsed_steps")
         queue.put(("tried", success))
         if args.only_count_success and not success:
             env.flush_trajectory(save=False)

@@ -22,7 +22,8 @@ the baselines and the LeRobot export store them), one frame is:
 ``info`` from the env holds booleans as batch-of-one tensors (``success``, ``fail``,
 ``is_grasped``, ``dropped``, ``in_target``, ``other_in_target``);
 :class:`~mani_skill_softvt.evaluation.wrapper.DSRWrapper` adds plain values
-(``deformation_ratio``, ``r_max``, ``task_success``, ``dsr_success``). :func:`info_bool` reads
+(``deformation_ratio``, ``r_max``, ``task_success``, ``collapsed_tets``, ``collapsed_steps``,
+``dsr_success``). :func:`info_bool` reads
 either form.
 """
 

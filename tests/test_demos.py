@@ -32,6 +32,7 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
         t = traj["actions"].shape[0]
         assert traj["actions_binary"].shape == (t, 7) and set(np.unique(traj["actions_binary"][:, 6])) <= {0.0, 1.0}
         assert traj["env_states/soft"].shape[0] == t + 1 and traj["evaluator/nodes"].shape[0] == t + 1
+        assert traj["evaluator/collapsed_tets"].shape == (t + 1,) and not traj["evaluator/collapsed_tets"][()].any()
         assert traj["success"][-1] and ep_meta["elapsed_steps"] == t
     manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
     assert manifest["train_seeds"]["3"][1] < manifest["id_eval_seeds"]["3"][0]
@@ -143,6 +144,9 @@ def test_screening_rejects_broken_episodes(dataset):
     bad = dict(ep, evaluator=dict(ep["evaluator"]))
     bad["evaluator"]["deformation_ratio"] = ep["evaluator"]["deformation_ratio"] * 0 + 1.5
     assert any("R_max" in p for p in screen(bad))
+    bad = dict(ep, evaluator=dict(ep["evaluator"]))
+    bad["evaluator"]["collapsed_tets"] = np.where(np.arange(len(ep["evaluator"]["collapsed_tets"])) == 40, 3, 0)
+    assert any("collapsed" in p for p in screen(bad))  # within tolerance, yet a tet collapsed
     bad = dict(ep, success=np.zeros_like(ep["success"]))
     assert any("not successful" in p for p in screen(bad))
     bad = dict(ep, actions=ep["actions"][:-1])

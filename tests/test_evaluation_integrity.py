@@ -59,7 +59,6 @@ def test_crushing_is_scored_as_failure_and_violation_and_the_episode_runs_on(cub
     assert len(rec["deformation_trace"]) == rec["steps"] + 1
     assert rec["r_max"] == pytest.approx(max(rec["deformation_trace"]) / rec["tau_o"], rel=1e-12)
     assert rec["record_sha256"] == record_hash(rec)
-    # A record scored without the count (as older ones were) would not see the violation.
     assert summarize([rec])["collapses"] == 1
 
 

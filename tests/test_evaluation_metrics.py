@@ -126,3 +126,51 @@ def test_relative_difference_measures_rounding_not_other_kinds_of_change():
     assert abs(relative_difference([1.0, 2.0], [1.0, 2.2]) - 0.2 / 2.2) < 1e-12
     assert relative_difference(True, False) is None and relative_difference("a", "b") is None
     assert relative_difference([1.0], [1.0, 2.0]) is None and relative_difference(None, 1.0) is None
+
+
+class _ScriptedScene:
+    """Stands in for a suite env's evaluator accessors: a D_t and a collapse count per state."""
+
+    def __init__(self, deformation, collapsed):
+        import gymnasium as gym
+        from types import SimpleNamespace
+
+        self.deformation_seq, self.collapsed_seq, self.k = deformation, collapsed, 0
+        outer = self
+
+        class Env(gym.Env):
+            observation_space = gym.spaces.Box(-1, 1, (1,))
+            action_space = gym.spaces.Box(-1, 1, (1,))
+            task = SimpleNamespace(rigid=False)
+            calibration_card = SimpleNamespace(tau_o=0.01)
+            target_instance = "object"
+
+            def reset(self, seed=None, options=None):
+                outer.k = 0
+                return np.zeros(1), {"success": False}
+
+            def step(self, action):
+                outer.k += 1
+                return np.zeros(1), 0.0, False, False, {"success": True}
+
+            def deformation(self, name):
+                return outer.deformation_seq[outer.k]
+
+            def collapsed_tets(self):
+                return outer.collapsed_seq[outer.k]
+
+        self.env = Env()
+
+
+def test_the_wrapper_fails_dsr_after_a_collapse_even_within_tolerance():
+    from mani_skill_softvt.evaluation.wrapper import DSRWrapper
+
+    scene = _ScriptedScene(deformation=[0.0, 0.002, 0.004, 0.003], collapsed=[0, 0, 2, 0])
+    env = DSRWrapper(scene.env)
+    env.reset()
+    infos = [env.step(np.zeros(1))[-1] for _ in range(3)]
+    assert [i["dsr_success"] for i in infos] == [True, False, False]  # once collapsed, for the episode
+    assert [i["collapsed_tets"] for i in infos] == [0, 2, 0] and env.collapsed_steps == 1
+    assert max(i["r_max"] for i in infos) == pytest.approx(0.4)  # within tolerance all along
+    env.reset()
+    assert env.collapsed_steps == 0 and env.step(np.zeros(1))[-1]["dsr_success"]

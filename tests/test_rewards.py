@@ -40,8 +40,8 @@ def test_deformation_penalty_is_zero_within_the_tolerance_and_grows_beyond_bound
     assert float(R.deformation_penalty(2.0)) == pytest.approx(np.tanh(1.0), abs=1e-6)
 
 
-def _staged(tcp=0.0, target=0.0, speed=0.0, grasped=False, in_target=False, success=False, ratio=0.0):
-    return float(R.staged_reward(tcp, target, speed, grasped, in_target, success, ratio))
+def _staged(tcp=0.0, target=0.0, speed=0.0, grasped=False, in_target=False, success=False, ratio=0.0, collapsed=False):
+    return float(R.staged_reward(tcp, target, speed, grasped, in_target, success, ratio, collapsed))
 
 
 def test_staged_reward_is_bounded_and_success_is_the_maximum():
@@ -83,6 +83,9 @@ def test_deformation_within_the_tolerance_costs_nothing_and_beyond_it_lowers_the
     assert _staged(**held, ratio=0.0) - _staged(**held, ratio=1e6) == pytest.approx(R.DEFORMATION_PENALTY_WEIGHT)
     # Never below zero, however far from the object and however squeezed.
     assert _staged(tcp=5.0, ratio=1e6) == 0.0
+    # A collapsed tet costs the penalty's bound even within the tolerance; success still pays in full.
+    assert _staged(**held, ratio=0.5, collapsed=True) == pytest.approx(_staged(**held, ratio=1e6))
+    assert _staged(**held, success=True, collapsed=True) == R.DENSE_REWARD_MAX
 
 
 # ---------------------------------------------------------------- the env

@@ -5,8 +5,8 @@
 ``env_info`` and one entry per episode), and adds per episode:
 
 - ``traj_<i>/evaluator/``: what scores the episode and never enters an observation: the
-  instructed object's FEM nodes (T+1, N, 3), every object's centroid (T+1, K, 3), D_t and R_t
-  (T+1), grasp, drop and pad-force events (T), and tau_o (all float32/float64/bool arrays);
+  instructed object's FEM nodes (T+1, N, 3), every object's centroid (T+1, K, 3), D_t, R_t and
+  the scene's collapsed tets (T+1), grasp, drop and pad-force events (T), and tau_o (all float32/float64/bool arrays);
 - ``traj_<i>/actions_binary`` (continuous-gripper modes): the actions with the gripper as the
   binary command (closure > 0 is "close");
 - in the episode's json entry and as the group's attributes: ``instruction``, ``target_instance``
@@ -34,7 +34,8 @@ from mani_skill.utils.wrappers.record import RecordEpisode
 from ..rollout import EvaluatorTrace
 
 # The evaluator trace's fields a recorded episode keeps beside "nodes" (float32), in this order.
-RECORDED = ("object_centroids", "deformation", "deformation_ratio", "is_grasped", "dropped", "pad_force")
+RECORDED = ("object_centroids", "deformation", "deformation_ratio", "collapsed_tets", "is_grasped", "dropped",
+            "pad_force")
 
 ENV_ID_MODULE = "mani_skill_softvt"
 

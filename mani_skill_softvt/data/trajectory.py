@@ -6,8 +6,8 @@ episode (``demos generate`` resumes per episode), then merged per task with Mani
 ``merge_trajectories``. Per episode ``traj_<i>`` holds ManiSkill's ``actions``, ``terminated``,
 ``truncated``, ``success``, ``fail``, ``env_states`` (including the FEM state, so
 ``set_state_dict`` replays it exactly), ``actions_binary`` (the same actions in the binary
-gripper encoding), an ``evaluator/`` group (FEM nodes, object centroids, D_t, R_t, grasp,
-contact and drop events) that never enters any observation, and the episode's ``seed``,
+gripper encoding), an ``evaluator/`` group (FEM nodes, object centroids, D_t, R_t, collapsed
+tets, grasp, contact and drop events) that never enters any observation, and the episode's ``seed``,
 ``closure``, ``instruction``, ``target_instance`` and ``planner`` as attributes (also in the json).
 """
 

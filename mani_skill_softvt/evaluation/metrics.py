@@ -1,11 +1,13 @@
 """Benchmark metrics as pure functions (paper section 4.2).
 
 R_t = D_t / tau_o, R_max = max_t R_t; an episode counts for the Deformation-aware Success Rate
-when the task succeeded and R_max <= 1. TSR = mean(T), DSR = mean(T * [R_max <= 1]).
+when the task succeeded, R_max <= 1 and no tet collapsed. TSR = mean(T), DSR = mean(T * [R_max <= 1]
+* [no collapse]).
 
-One addition to the paper's criterion: an episode in which a tet of the object collapsed or
-inverted (``collapsed_steps`` > 0) violated its tolerance whatever R_max says. The mesh then no
-longer represents the local compression, so D_t cannot certify that the object was handled gently.
+The collapse is one addition to the paper's criterion: an episode in which a tet of a soft object
+in the scene collapsed or inverted (``collapsed_steps`` > 0) violated its tolerance whatever R_max
+says. The mesh then no longer represents the local compression, so D_t cannot certify that the
+object was handled gently.
 """
 
 from __future__ import annotations

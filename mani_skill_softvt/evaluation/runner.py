@@ -12,9 +12,11 @@ Every episode ends in a record, whatever the policy does; its ``termination`` sa
 - ``worker_died``: the process running the episode died (out of memory, a crash in native
   code, a kill); ``error`` says how. Nothing of the episode survives, so ``r_max`` is ``None``.
 
-A tet of the object that collapses or inverts (a fingertip pressing one node, a crushing grip)
-does not end the episode: the FEM recovers from it. ``collapsed_steps`` counts the states with
-one, and any makes the episode a tolerance violation (:func:`~.metrics.collapsed`).
+A tet of a soft object in the scene that collapses or inverts (a fingertip pressing one node, a
+crushing grip) does not end the episode: the FEM recovers from it. ``collapsed_steps`` counts the
+states with one, and any makes the episode a tolerance violation (:func:`~.metrics.collapsed`).
+Records without ``collapsed_steps`` were made when the first collapse ended the episode as
+``sim_unstable``.
 
 Records go to a JSONL file, one line per finished episode, written by the main process only.
 Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``, and for a
@@ -80,18 +82,11 @@ def run_records(path: Path, policy: str, obs_mode: str, control_mode: str,
                 camera_size: tuple[int, int] | None = None, policy_sha256: str | None = None) -> dict[tuple, dict]:
     """The verified records of one run configuration in ``path``, by episode key (resume matches on
     the configuration: another policy, obs mode, control mode or camera size is another run, and
-    so is another policy file's content; records from before the hash was kept match on the rest).
-    A ``sim_unstable`` record without ``collapsed_steps`` is not done: it was made when the first
-    collapsed tet ended an episode, which now runs on (a re-run appends its new record)."""
+    so is another policy file's content; records from before the hash was kept match on the rest)."""
     config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
               "tactile_model": tactile_model(obs_mode), "camera_size": recorded_camera_size(obs_mode, camera_size)}
     return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())
-            and r.get("policy_sha256", policy_sha256) == policy_sha256 and not ended_by_a_collapse(r)}
-
-
-def ended_by_a_collapse(rec: dict) -> bool:
-    """A record from before collapsed tets were counted that may have ended at one (see run_records)."""
-    return rec.get("termination") == "sim_unstable" and "collapsed_steps" not in rec
+            and r.get("policy_sha256", policy_sha256) == policy_sha256}
 
 
 def policy_file_sha256(spec: str) -> str | None:

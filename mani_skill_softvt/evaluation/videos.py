@@ -82,7 +82,8 @@ def gauge_box(width: int) -> tuple[int, int, int, int]:
     return width - 236, STRIP_HEIGHT - 26, width - 12, STRIP_HEIGHT - 10
 
 
-def rt_strip(r_trace, width: int, max_steps: int, instruction: str, success: bool, dsr_success: bool) -> np.ndarray:
+def rt_strip(r_trace, width: int, max_steps: int, instruction: str, success: bool, dsr_success: bool,
+             collapsed: bool = False) -> np.ndarray:
     """The strip under the panels: text, the R_t trace so far against the tolerance, and a gauge of the last R_t.
 
     ``r_trace`` holds R_t from the reset on (step 0), so its last value is the current step's.
@@ -120,7 +121,8 @@ def rt_strip(r_trace, width: int, max_steps: int, instruction: str, success: boo
 
     # Text block and gauge, right of the plot.
     tx = width - 236
-    state = f"success {'yes' if success else 'no'}   DSR {'yes' if dsr_success else 'no'}"
+    why = " (collapse)" if collapsed and not dsr_success else ""  # DSR lost with R_t under the line
+    state = f"success {'yes' if success else 'no'}   DSR {'yes' if dsr_success else 'no'}{why}"
     cv2.putText(strip, f"step {step}/{max_steps}   R_max {float(r.max()):.2f}", (tx, 44), FONT, 0.45, TEXT, 1,
                 cv2.LINE_AA)
     cv2.putText(strip, state, (tx, 64), FONT, 0.45, TEXT, 1, cv2.LINE_AA)
@@ -144,12 +146,14 @@ def _pad_to(image: np.ndarray, multiple: int) -> np.ndarray:
 
 
 def compose_frame(base_rgb, hand_rgb, tactile_left, tactile_right, r_trace, *, instruction: str = "",
-                  max_steps: int = 300, success: bool = False, dsr_success: bool = False) -> np.ndarray:
+                  max_steps: int = 300, success: bool = False, dsr_success: bool = False,
+                  collapsed: bool = False) -> np.ndarray:
     """One video frame (H, W, 3) uint8, H and W multiples of 16 (pure: no env, no I/O).
 
     Panels left to right: base camera, wrist camera, left and right tactile images (scaled to the
     base camera's height, at least :data:`PANEL_HEIGHT`; the sensor has drawn the markers already).
-    Below them the strip of ``rt_strip``: ``r_trace`` is R_t from the reset to the current step.
+    Below them the strip of ``rt_strip``: ``r_trace`` is R_t from the reset to the current step;
+    ``collapsed``: a tet has collapsed so far (DSR is lost whatever R_t shows).
     """
     base = as_image(base_rgb)
     height = max(base.shape[0], PANEL_HEIGHT)
@@ -159,7 +163,7 @@ def compose_frame(base_rgb, hand_rgb, tactile_left, tactile_right, r_trace, *, i
               _label(resize_to_height(as_image(tactile_left), height), "tactile left"),
               _label(resize_to_height(as_image(tactile_right), height), "tactile right")]
     top = np.concatenate(panels, axis=1)
-    strip = rt_strip(r_trace, top.shape[1], max_steps, instruction, success, dsr_success)
+    strip = rt_strip(r_trace, top.shape[1], max_steps, instruction, success, dsr_success, collapsed)
     return _pad_to(np.concatenate([top, strip], axis=0), MACRO_BLOCK)
 
 
@@ -171,7 +175,8 @@ def frame_from_obs(obs: dict, r_trace, info: dict, instruction: str, max_steps: 
         raise ValueError(f"observation lacks {e}: videos need obs_mode 'rgb+tactile' (cameras and tactile images)") \
             from e
     return compose_frame(*images, r_trace, instruction=instruction, max_steps=max_steps,
-                         success=bool(info["task_success"]), dsr_success=bool(info["dsr_success"]))
+                         success=bool(info["task_success"]), dsr_success=bool(info["dsr_success"]),
+                         collapsed=bool(info.get("collapsed_steps")))
 
 
 def video_name(stem: str, episode: dict) -> str:

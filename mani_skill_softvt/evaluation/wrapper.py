@@ -16,8 +16,8 @@ class DSRWrapper(gym.Wrapper):
     - ``deformation_ratio``: R_t = D_t / tau_o of the instructed object,
     - ``r_max``: max R_t so far this episode,
     - ``task_success``: the env's kinematic success,
-    - ``collapsed_tets``: tets of the scene's soft objects now collapsed or inverted
-      (``collapsed_steps`` counts the states with any this episode),
+    - ``collapsed_tets``: tets of the scene's soft objects now collapsed or inverted, and
+      ``collapsed_steps``: the states with any so far this episode,
     - ``dsr_success``: task success with R_max <= 1 and no collapse so far, on every suite. Rigid
       twins are PhysX rigid bodies, so their R_max is ~0 and DSR equals TSR there by physics (the
       paper's premise), not by a special case.
@@ -48,6 +48,7 @@ class DSRWrapper(gym.Wrapper):
         success = info_bool(info, "success")
         info = dict(info)
         info.update(deformation_ratio=r, r_max=self.r_max, task_success=success, collapsed_tets=collapsed,
+                    collapsed_steps=self.collapsed_steps,
                     dsr_success=dsr_success(success, self.r_max, self.collapsed_steps > 0))
         return info
 

@@ -43,9 +43,10 @@ SOFT_CONTACT_GAP = 4.0e-3
 DEFAULT_TET_DAMPING = 1.0  # Pa*s
 DEFAULT_OBJECT_FRICTION = 1.0
 
-# Health checks.
+# Health check (a blow-up ends the episode).
 MAX_PARTICLE_SPEED = 5.0  # m/s: nothing in a tabletop pick-and-place moves this fast
-MIN_TET_VOLUME_RATIO = 0.02  # a tet squashed below 2 % of its rest volume counts as collapsed
+# A tet squashed to 2 % of its rest volume or less counts as collapsed: scored, not raised (evaluation/metrics.py).
+MIN_TET_VOLUME_RATIO = 0.02
 
 IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])  # SAPIEN order [p, q_wxyz]
 

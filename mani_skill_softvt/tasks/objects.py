@@ -22,7 +22,7 @@ from ..assets.materials import SoftMaterial
 from ..assets.tetmesh import embed_points, surface_of_tets, vertex_normals
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
-from ..physics.fem import SoftBodyWorld, vbd_schedule
+from ..physics.fem import SimulationInstabilityError, SoftBodyWorld, vbd_schedule
 from ..physics.rigid import RigidObject, rigid_nodes
 from . import constants as C
 from . import fingers
@@ -335,6 +335,9 @@ class FEMObjects(SceneObjects):
             if (ticks >= min_ticks and v < speed) or ticks >= max_ticks:
                 break
         world.check_health()
+        collapsed = {name: world.collapsed_tets(i) for name, i in self.index.items()}
+        if any(collapsed.values()):  # a scene defect (a spawn inside a prop), not a policy's doing
+            raise SimulationInstabilityError(f"settling collapsed tets {collapsed} before the episode began")
         world.wake()  # the episode starts awake; it may fall asleep in its own first ticks
         self.coupling.wrenches[:] = 0.0
         world.time = 0.0

@@ -16,7 +16,9 @@ instability cannot swamp the return. The sum is clipped to [0, DENSE_REWARD_MAX]
 
 The benchmark's DSR asks for R_max <= 1 over the whole episode; a Markov reward sees only R_t, so
 the penalty discourages over-squeezing while it happens and success is rewarded by the sparse
-success alone (as the paper scores it).
+success alone (as the paper scores it). A collapsed tet (the evaluator's other violation,
+evaluation/metrics.py) costs the penalty's bound while it lasts: the mesh cannot measure that
+squeeze, so it is charged as the worst one.
 
 Inputs are floats, numpy arrays or tensors (broadcast together); outputs are float32 tensors.
 """
@@ -51,12 +53,13 @@ def deformation_penalty(ratio, weight: float = DEFORMATION_PENALTY_WEIGHT) -> to
 
 
 def staged_reward(tcp_to_object, object_to_target, object_speed, grasped, in_target, success,
-                  deformation_ratio) -> torch.Tensor:
+                  deformation_ratio, collapsed=False) -> torch.Tensor:
     """The dense reward of one step (see the module docstring), in [0, DENSE_REWARD_MAX].
 
-    Distances in m, speed in m/s, the flags as bools (or 0/1), the deformation ratio R_t = D_t / tau_o.
+    Distances in m, speed in m/s, the flags as bools (or 0/1), the deformation ratio R_t = D_t / tau_o,
+    ``collapsed``: a tet of the scene is collapsed now.
     """
-    grasped, in_target, success = (_tensor(x).bool() for x in (grasped, in_target, success))
+    grasped, in_target, success, collapsed = (_tensor(x).bool() for x in (grasped, in_target, success, collapsed))
     reward = distance_reward(tcp_to_object)
     reward = reward + grasped.float()
     # Carrying towards the target is rewarded only while the object goes with the hand (or has
@@ -64,7 +67,8 @@ def staged_reward(tcp_to_object, object_to_target, object_speed, grasped, in_tar
     reward = reward + distance_reward(object_to_target) * (grasped | in_target).float()
     # Released in the target: the grasp term is gone, the object's coming to rest takes its place.
     reward = reward + rest_reward(object_speed) * (in_target & ~grasped).float()
-    reward = (reward - deformation_penalty(deformation_ratio)).clamp(0.0, DENSE_REWARD_MAX)
+    penalty = torch.where(collapsed, torch.tensor(DEFORMATION_PENALTY_WEIGHT), deformation_penalty(deformation_ratio))
+    reward = (reward - penalty).clamp(0.0, DENSE_REWARD_MAX)
     return torch.where(success, torch.full_like(reward, DENSE_REWARD_MAX), reward)
 
 

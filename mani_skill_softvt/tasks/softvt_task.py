@@ -231,7 +231,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
         return self.target.pose.p[0].cpu().numpy().astype(np.float64) + 0.5 * (lo + hi)
 
     def compute_dense_reward(self, obs, action, info):
-        # Evaluator-only quantities (centroid, velocity, D_t) shape the reward; none reaches the observation.
+        # Evaluator-only quantities (centroid, velocity, D_t, collapses) shape the reward; none reaches the observation.
         name = self.target_instance
         kin = self._object_kinematics(name)
         tcp = self.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64)
@@ -241,6 +241,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
             object_speed=np.linalg.norm(kin["velocity"]),
             grasped=info["is_grasped"], in_target=info["in_target"], success=info["success"],
             deformation_ratio=self.deformation(name) / self.deformation_tolerance,
+            collapsed=self.collapsed_tets() > 0,
         )
         return reward.reshape(1).to(self.device)
 
