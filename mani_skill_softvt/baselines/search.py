@@ -231,11 +231,11 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
 
     closed = closed_loop_summaries(results_dir) if closed is None else closed
     fig, (ax_err, ax_tsr) = plt.subplots(1, 2, figsize=(11, 4))
-    for run in sorted({r["run"] for r in rows}):
+    for i, run in enumerate(sorted({r["run"] for r in rows})):
         mine = sorted((r for r in rows if r["run"] == run), key=lambda r: r["step"])
-        label = f"{mine[0]['recipe']} ({run[:6]})"
+        label, color = f"{mine[0]['recipe']} ({run[:6]})", f"C{i % 10}"  # one colour per run in both panels
         minutes = [r["train_wall_s"] / 60 for r in mine]
-        ax_err.plot(minutes, [r["heldout"]["position_mm_mean"] for r in mine], "o-", label=label)
+        ax_err.plot(minutes, [r["heldout"]["position_mm_mean"] for r in mine], "o-", label=label, color=color)
         loop = [(m, closed[(run, r["step"])]) for m, r in zip(minutes, mine) if (run, r["step"]) in closed]
         if loop:
             x = [m for m, _ in loop]
@@ -243,11 +243,11 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
             lo = [100 * c["tsr_ci95"][0] for _, c in loop]
             hi = [100 * c["tsr_ci95"][1] for _, c in loop]
             ax_tsr.errorbar(x, tsr, yerr=[[a - b for a, b in zip(tsr, lo)], [b - a for a, b in zip(tsr, hi)]],
-                            fmt="o-", capsize=3, label=label)
+                            fmt="o-", capsize=3, label=label, color=color)
     ax_err.set(xlabel="training time (min, one core)", ylabel="held-out TCP position error (mm)",
                title=f"{variant}: open loop")
     ax_tsr.set(xlabel="training time (min, one core)", ylabel="TSR (%), 95 % Wilson interval", ylim=(0, 100),
-               title=f"{variant}: closed loop, ID protocol")
+               xlim=(0, max(ax_err.get_xlim()[1], 1.0)), title=f"{variant}: closed loop, ID protocol")  # the same time axis
     for ax in (ax_err, ax_tsr):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
