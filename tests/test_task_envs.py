@@ -336,3 +336,47 @@ def test_an_expert_episode_scores_the_same_with_the_unread_cameras_skipped():
     # The expert's chunks of 8 leave 7 unread, and it declines every other chunk's last.
     assert len(skips) >= full["steps"] * 7 // 8
     assert skipped == full
+
+
+def _press_into_the_basket(env, seed: int, offset=(-0.04, -0.02), steps=60) -> list[dict]:
+    """The half-closed hand lowered onto the basket's rim until the fingers press its wall and the
+    table; every state of the episode."""
+    env.reset(seed=seed)
+    u = env.unwrapped
+    target = u.target.pose.p[0, :2].cpu().numpy() + np.asarray(offset)
+    states = []
+    for i in range(steps):
+        env.step(ee_action(np.array([*target, max(0.14 - 0.004 * i, 0.0)]), 0.5, yaw=0.3))
+        states.append(u.get_state_dict())
+    return states
+
+
+def _state_bytes(state) -> bytes:
+    if isinstance(state, dict):
+        return b"".join(k.encode() + _state_bytes(v) for k, v in sorted(state.items()))
+    return np.asarray(state.cpu() if isinstance(state, torch.Tensor) else state).tobytes()
+
+
+def _first_difference(a: list[dict], b: list[dict]) -> int | None:
+    """The first step at which two episodes' states differ in any bit (None: none does)."""
+    return next((i for i, (x, y) in enumerate(zip(a, b)) if _state_bytes(x) != _state_bytes(y)), None)
+
+
+def test_an_episode_is_the_same_bits_in_a_fresh_env_and_after_other_episodes():
+    """An episode must not depend on what ran before it in the same env: the evaluator's resume
+    and ``--reproduce`` run episodes in other orders. PhysX keeps contact state across a plain
+    reset: the second run of this episode in one env parts from the first at step 32, when a
+    finger presses the basket (a Diffusion Policy's soft-cube episode parted so at step 153, a
+    finger's impulse on the basket 0.3766 against 0.3753 N s). Every reset therefore rebuilds the
+    scene."""
+    make = lambda **kw: gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="state_dict", **kw)  # noqa: E731
+    fresh = _press_into_the_basket(make(), seed=7)
+    env = make()
+    assert _first_difference(_press_into_the_basket(env, seed=7), fresh) is None
+    assert _first_difference(_press_into_the_basket(env, seed=7), fresh) is None  # again, in the same env
+    # Without the rebuild the same scenario is not reproducible: this is what the test guards.
+    plain = make(reconfiguration_freq=0)
+    _press_into_the_basket(plain, seed=7)
+    assert _first_difference(_press_into_the_basket(plain, seed=7), fresh) is not None, (
+        "PhysX no longer carries contact state across a reset in this scenario: the test no longer tests "
+        "anything; find another that does, or drop the per-reset rebuild if PhysX was fixed")

@@ -223,19 +223,15 @@ def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: st
         raise ValueError(f"{policy_spec} changed while the evaluation started (its SHA-256 is not the one its records "
                          "will carry); evaluate again once it is no longer being written")
 
-    def build():
-        return make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
-                        camera_size=camera_size)
-
-    env = build()
+    # Every reset rebuilds the scene (SoftBodyEnv), so an episode is the same whichever ran before
+    # it in this env, a blown-up one included: a resumed run and --reproduce match a full run.
+    env = make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
+                   camera_size=camera_size)
     try:
         for ep in batch:
             queue.put(("start", ep))
             rec = run_episode(env, policy, ep, policy_spec=policy_spec, policy_sha256=policy_sha256)
             queue.put(("record", rec))
-            if rec["termination"] == "sim_unstable":  # start the next episode from a freshly built simulator
-                env.close()
-                env = build()
     finally:
         env.close()
     return len(batch)

@@ -53,6 +53,8 @@ from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
 
 # Reset options: the episode's physical factors, and ManiSkill's own.
 RESET_OPTIONS = frozenset({"ood", *FACTOR_OPTIONS, "reconfigure", "env_idx", "reset_to_env_states"})
+# Resets between scene rebuilds: 1, every episode starts in a scene built for it (see __init__).
+RECONFIGURATION_FREQ = 1
 TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plus both fingers' GelSight
 
 
@@ -77,6 +79,11 @@ class SoftBodyEnv(BaseEnv):
         if kwargs["sim_backend"] not in ("physx_cpu", "cpu"):
             raise ValueError(f"SoftVT envs need sim_backend='physx_cpu' or 'auto' (got {kwargs['sim_backend']!r}): "
                              "the FEM coupling runs on the CPU, one env per process")
+        # Every reset rebuilds the scene (ManiSkill's reconfiguration; about 0.9 s). PhysX keeps
+        # contact state across a plain reset that changes how a later contact rounds, so an
+        # episode would depend on what ran before it in the same env (docs/limitations.md).
+        # reconfiguration_freq=0 trades that for speed.
+        kwargs.setdefault("reconfiguration_freq", RECONFIGURATION_FREQ)
         self.objects: SceneObjects | None = None  # the scene's objects (soft or rigid twins), built with it
         self._x0: dict[str, np.ndarray] = {}
         self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
