@@ -210,6 +210,14 @@ class SoftBodyEnv(BaseEnv):
         super()._after_reconfigure(options)
         fingers.set_finger_inertia(self.agent.robot)
         self.objects.connect(self.agent.robot, self.table, self._props)
+        # The new scene is nominal; a reset to given env states skips _initialize_episode, so its
+        # factors take effect here (applying them again there changes nothing: scales are absolute).
+        self.apply_factors(resolve_factors(options))
+
+    def _clear(self):
+        # Let go of the old scene before ManiSkill collects it, so one scene is alive at a time.
+        self.objects, self._props, self._tactile, self._lights, self._ambient = None, [], {}, [], None
+        super()._clear()
 
     # ------------------------------------------------------------------ episode
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
@@ -275,6 +283,7 @@ class SoftBodyEnv(BaseEnv):
         unknown = sorted(set(options or {}) - RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; SoftVT envs take {sorted(RESET_OPTIONS)}")
+        resolve_factors(options or {})  # a bad factor fails here, before the scene is rebuilt
         given = (options or {}).get("reset_to_env_states", {})
         if "obs" in given and self._last_obs is not None and "sensor_data" in self._last_obs \
                 and not self._last_obs["sensor_data"]:
@@ -429,8 +438,8 @@ class SoftBodyEnv(BaseEnv):
 
     @property
     def soft_world_stats(self) -> dict:
-        """Newton ticks simulated and ticks skipped asleep since the env was built (benchmarks,
-        tests); None in a scene of rigid twins (no Newton world)."""
+        """Newton ticks simulated and ticks skipped asleep since the last reset (which builds the
+        scene) (benchmarks, tests); None in a scene of rigid twins (no Newton world)."""
         return self.objects.stats
 
     # ------------------------------------------------------------------ evaluator-only
