@@ -630,7 +630,7 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
         r = ({"suite": "object_soft", "task_id": 0, "condition": "id", "seed": seed, "success": success,
                       "dsr_success": success and r_max <= 1, "r_max": r_max, "termination": "success" if success else "timeout",
                       "receipt": {"policy": f"diffusion_policy[{variant}]"}, "policy": policy, "tau_o": 0.01,
-                      "policy_sha256": sha})
+                      "policy_sha256": sha, "deformation_trace": [0.0, 0.01 * r_max]})
         return {**r, "record_sha256": record_hash(r)}
 
     path, old = tmp_path / "r.jsonl", tmp_path / "old.jsonl"
@@ -654,6 +654,13 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     text = (tmp_path / "results.md").read_text()
     assert "| object_soft | ID | vo-c (x) | 11 | 36.4 [" in text and "no successes" in text
     assert "| object_soft/id/vo-c (x) | 4 | 0 | 6 | 0 | 0 | 1 | 1 | 0 | 0.500 |" in text  # one squeeze past tolerance, no collapse
+    assert "| 0 | 36 / 27 of 11 |" in text  # per task, beside the other variants
+    # Paired on seeds 0-4: vo-c (x) succeeded in 4 the vt-b never did; exact McNemar 2 * (1/2)^4.
+    pair = data["comparisons"]["object_soft/id: vo-c (x) vs vt-b (z)"]["success"]
+    assert (pair["pairs"], pair["only_a"], pair["only_b"], pair["neither"]) == (5, 4, 0, 1)
+    assert pair["p_value"] == pytest.approx(0.125) and pair["unpaired"] == 11 - 5
+    assert not any("old physics" in k for k in data["comparisons"])  # never compared across physics
+    assert (tmp_path / "success_traces.png").stat().st_size > 0
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):

@@ -174,3 +174,25 @@ def test_the_wrapper_fails_dsr_after_a_collapse_even_within_tolerance():
     assert max(i["r_max"] for i in infos) == pytest.approx(0.4)  # within tolerance all along
     env.reset()
     assert env.collapsed_steps == 0 and env.step(np.zeros(1))[-1]["dsr_success"]
+
+
+def test_paired_comparison_counts_matched_seeds_and_mcnemar_is_the_binomial_tail():
+    from mani_skill_softvt.evaluation.metrics import mcnemar_exact_p, paired_comparison
+
+    def rec(task, seed, success, dsr):
+        return {"suite": "object_soft", "condition": "id", "task_id": task, "seed": seed,
+                "success": success, "dsr_success": dsr}
+
+    a = [rec(0, 1, True, True), rec(0, 2, True, False), rec(1, 3, False, False), rec(1, 4, True, True)]
+    b = [rec(0, 1, True, False), rec(0, 2, False, False), rec(1, 3, True, True), rec(2, 9, True, True)]
+    c = paired_comparison(a, b)
+    assert (c["pairs"], c["both"], c["only_a"], c["only_b"], c["neither"], c["unpaired"]) == (3, 1, 1, 1, 0, 2)
+    assert c["difference"] == 0.0 and c["p_value"] == 1.0
+    d = paired_comparison(a, b, "dsr_success")
+    assert (d["both"], d["only_a"], d["only_b"], d["neither"]) == (0, 1, 1, 1)
+    # Exact tails: 0 of 5 discordant pairs to B -> 2 * (1/2)^5; 1 of 10 -> 2 * 11 / 1024.
+    assert mcnemar_exact_p(5, 0) == pytest.approx(2 / 32)
+    assert mcnemar_exact_p(1, 9) == pytest.approx(2 * 11 / 1024)
+    assert mcnemar_exact_p(0, 0) == 1.0 and mcnemar_exact_p(3, 3) == 1.0
+    with pytest.raises(ValueError, match="twice"):
+        paired_comparison(a + a[:1], b)

@@ -3,6 +3,7 @@
 import numpy as np
 
 from mani_skill_softvt.baselines.probes import (
+    RidgeSolver,
     balanced_accuracy,
     r2,
     ridge_fit,
@@ -35,6 +36,20 @@ def test_ridge_recovers_a_linear_map_and_shrinks_with_the_penalty():
     w_big, _ = ridge_fit(x, y, 1e3)
     assert np.linalg.norm(w_big) < 0.01 * np.linalg.norm(w_true)
     assert abs(r2(y, np.full_like(y, y.mean()))) < 1e-12  # the mean scores 0
+
+
+def test_ridge_read_in_blocks_equals_the_closed_form_on_the_whole_matrix(monkeypatch):
+    # The solver reads a float32 input in float64 blocks; the blocks must add up to the normal
+    # equations of the whole, centred matrix (to float64 rounding, not float32's).
+    rng = np.random.default_rng(1)
+    x = (rng.normal(size=(300, 6)) + 5.0).astype(np.float32)  # off-centre: the centring matters
+    y = rng.normal(size=300)
+    monkeypatch.setattr(RidgeSolver, "BLOCK", 64)  # 5 blocks, the last one short
+    w, b = RidgeSolver(x).fit(y, 0.1)
+    xc = x.astype(np.float64) - x.astype(np.float64).mean(0)
+    w_ref = np.linalg.solve(xc.T @ xc + 0.1 * 300 * np.eye(6), xc.T @ (y - y.mean()))
+    np.testing.assert_allclose(w, w_ref, rtol=1e-10, atol=1e-12)
+    assert abs(b - (y.mean() - x.astype(np.float64).mean(0) @ w_ref)) < 1e-10
 
 
 def test_auc_and_balanced_accuracy_match_their_definitions():

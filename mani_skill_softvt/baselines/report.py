@@ -11,18 +11,26 @@ that left the calibrated tolerance) and its share of the successes, how episodes
 episodes of any ending squeezed the object past its tolerance (R_max > 1, a collapsed tet, or a
 blown-up FEM: harm that TSR - DSR cannot show when a policy never succeeds) and in how many a tet
 collapsed, and the paper's
-numbers for the same configuration. Records given with ``--legacy`` (made under an older physics
-or sensor) are rows of their own, marked ``[old physics]``, never pooled with today's.
+numbers for the same configuration. Then TSR / DSR per task side by side, and every two of
+today's variants compared on the episodes both ran (the protocol's seeds are the same for every
+policy, so the comparison is paired: exact McNemar p-values). ``<out>/success_traces.png`` draws
+the R_t traces of each variant's successes, within and beyond the tolerance (the paper's
+qualitative figure). Records given with ``--legacy`` (made under an older physics or sensor) are
+rows of their own, marked ``[old physics]``, never pooled with today's nor compared with them.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 from pathlib import Path
 
-from ..evaluation.metrics import percent_ci, summarize
+import numpy as np
+
+from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
 from ..evaluation.runner import policy_tag, read_records
 from ..fileio import atomic_write, atomic_write_json
+from ..physics.constants import CONTROL_FREQ
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
 # variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
@@ -65,11 +73,91 @@ def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
     return out
 
 
-def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
-    groups: dict[str, list[dict]] = {}
+def grouped(records: list[dict], legacy: list[dict] = ()) -> dict[tuple[str, str, str], list[dict]]:
+    """Records by (suite, condition, row label), today's first, the legacy rows marked."""
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for recs, old in ((records, False), (list(legacy), True)):
         for r, label in zip(recs, group_labels(recs, old)):
             groups.setdefault((r["suite"], r["condition"], label), []).append(r)
+    return groups
+
+
+def per_task_lines(groups: dict) -> list[str]:
+    """TSR / DSR (%) of each task, one column per variant."""
+    keys = sorted(groups)
+    per = {k: {t[0]: s for t, s in group_summaries(groups[k], ("task_id",)).items()} for k in keys}
+    tasks = sorted({t for k in keys for t in per[k]})
+    several = len({k[:2] for k in keys}) > 1  # task numbers are per suite: name it where there are several
+    names = [f"{k[0]}/{k[1]}/{k[2]}" if several else k[2] for k in keys]
+    lines = ["| task | " + " | ".join(f"{n} TSR / DSR %" for n in names) + " |", "|---" * (len(keys) + 1) + "|"]
+    for t in tasks:
+        cells = [f"{percent(per[k][t]['tsr'], 0)} / {percent(per[k][t]['dsr'], 0)} of {per[k][t]['episodes']}"
+                 if t in per[k] else "-" for k in keys]
+        lines.append(f"| {t} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def comparisons(groups: dict) -> dict[str, dict]:
+    """Every two of today's variants of one suite and protocol, paired on their common episodes:
+    TSR and DSR."""
+    out = {}
+    today = sorted(k for k in groups if not k[2].endswith("[old physics]"))
+    for a, b in itertools.combinations(today, 2):
+        if a[:2] == b[:2]:
+            pair = {o: paired_comparison(groups[a], groups[b], o) for o in ("success", "dsr_success")}
+            if pair["success"]["pairs"]:
+                out[f"{a[0]}/{a[1]}: {a[2]} vs {b[2]}"] = pair
+    return out
+
+
+def comparison_lines(pairs: dict[str, dict]) -> list[str]:
+    lines = ["| comparison (A vs B) | outcome | pairs | both | only A | only B | neither | A - B (points) | McNemar p |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, pair in pairs.items():
+        for outcome, label in (("success", "task success"), ("dsr_success", "deformation-aware success")):
+            c = pair[outcome]
+            lines.append(f"| {name} | {label} | {c['pairs']} | {c['both']} | {c['only_a']} | {c['only_b']} | "
+                         f"{c['neither']} | {100 * c['difference']:+.1f} | {c['p_value']:.2g} |")
+    return lines
+
+
+def plot_success_traces(groups: dict, out: Path) -> Path | None:
+    """R_t of each of today's variants' successes against time, green within the tolerance, red
+    beyond it (R_max > 1 or a tet collapsed); None when no variant succeeded."""
+    today = [(k, [r for r in groups[k] if r["success"] and r.get("deformation_trace")])
+             for k in sorted(groups) if not k[2].endswith("[old physics]")]
+    today = [(k, recs) for k, recs in today if recs]
+    if not today:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(today), figsize=(4.2 * len(today), 3.4), squeeze=False, sharey=True)
+    peak = max(r["r_max"] for _, recs in today for r in recs)
+    for ax, ((suite, condition, label), recs) in zip(axes[0], today):
+        within = sum(bool(r["dsr_success"]) for r in recs)
+        for r in sorted(recs, key=lambda r: r["dsr_success"]):  # the red ones under the green
+            rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
+            ax.plot(np.arange(len(rt)) / CONTROL_FREQ, rt, lw=0.6, alpha=0.35,
+                    color="tab:green" if r["dsr_success"] else "tab:red")
+        ax.axhline(1.0, color="k", ls="--", lw=1)
+        ax.set_title(f"{label}\n{suite} {condition}: {within} of {len(recs)} successes within tolerance", fontsize=8)
+        ax.set_xlabel("time (s)")
+        ax.set_ylim(0, min(max(1.2, 1.05 * peak), 4.0))  # a few crushing peaks would flatten the rest
+    axes[0][0].set_ylabel("R_t = D_t / tau_o")
+    axes[0][0].plot([], [], color="tab:green", label="within tolerance")
+    axes[0][0].plot([], [], color="tab:red", label="beyond (R_max > 1 or a tet collapsed)")
+    axes[0][0].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
+    plt.close(fig)
+    return out
+
+
+def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
+    groups = grouped(records, legacy)
     data, lines = {}, []
     header = ("| suite | protocol | variant | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR % [95% CI] | share of successes % [95% CI] "
               "| paper TSR / DSR (model) |\n|---|---|---|---|---|---|---|---|---|")
@@ -89,7 +177,11 @@ def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
         ends = [str(s["terminations"].get(k, 0)) for k in ENDINGS]
         lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['collapses']} "
                      f"| {s['r_max_median']:.3f} |")
-    return "\n".join(lines) + "\n", data
+    lines += ["", "Per task:", "", *per_task_lines(groups)]
+    pairs = comparisons(groups)
+    if pairs:
+        lines += ["", "Paired on the same episodes (p: exact McNemar, two-sided):", "", *comparison_lines(pairs)]
+    return "\n".join(lines) + "\n", {**data, "comparisons": pairs}
 
 
 def main(argv=None) -> dict:
@@ -109,6 +201,7 @@ def main(argv=None) -> dict:
     out = out.parent if out.suffix == ".jsonl" else out
     atomic_write(out / "results.md", lambda p: p.write_text(text))
     atomic_write_json(out / "results.json", data)
+    plot_success_traces(grouped(records, legacy), out / "success_traces.png")
     print(text)
     return data
 

@@ -122,3 +122,33 @@ def rescore_record(record: dict, tau_new: float) -> dict:
     out = dict(record, tau_o=tau_new, r_max=peak)
     out["dsr_success"] = dsr_success(record["success"], peak, collapsed(record))
     return out
+
+
+def mcnemar_exact_p(only_a: int, only_b: int) -> float:
+    """Two-sided exact McNemar p-value: the chance, if A and B were equally good, of discordant
+    pairs splitting at least as unevenly as ``only_a`` : ``only_b`` (a binomial test at 1/2)."""
+    n, k = only_a + only_b, min(only_a, only_b)
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2 ** n
+    return min(1.0, 2 * tail)
+
+
+def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success") -> dict:
+    """Two policies on the same episodes (matched by suite, condition, task and seed): how many
+    pairs both / only A / only B / neither got ``outcome`` (``success`` or ``dsr_success``), the
+    difference of rates with its exact McNemar p-value. Pairing removes the seed-to-seed spread
+    that two independent intervals carry; episodes only one policy ran are left out and counted."""
+    key = lambda r: (r["suite"], r["condition"], r["task_id"], r["seed"])
+    a_by, b_by = {key(r): r for r in a}, {key(r): r for r in b}
+    if len(a_by) < len(a) or len(b_by) < len(b):
+        raise ValueError("an episode (suite, condition, task, seed) appears twice in one policy's records")
+    common = sorted(set(a_by) & set(b_by))
+    counts = {"both": 0, "only_a": 0, "only_b": 0, "neither": 0}
+    for k in common:
+        ga, gb = bool(a_by[k][outcome]), bool(b_by[k][outcome])
+        counts["both" if ga and gb else "only_a" if ga else "only_b" if gb else "neither"] += 1
+    n = len(common)
+    return {"pairs": n, **counts, "unpaired": len(a_by) + len(b_by) - 2 * n,
+            "difference": (counts["only_a"] - counts["only_b"]) / n if n else 0.0,
+            "p_value": mcnemar_exact_p(counts["only_a"], counts["only_b"])}

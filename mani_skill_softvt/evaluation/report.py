@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
+from ..physics.constants import CONTROL_FREQ
 from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
 from .metrics import group_summaries, percent, percent_ci, summarize
 
@@ -67,7 +68,7 @@ def plot_traces(records: list[dict], out: Path) -> None:
     for r in records:
         if not r["deformation_trace"]:  # nothing measured (a worker died)
             continue
-        t = np.arange(len(r["deformation_trace"])) / 20.0
+        t = np.arange(len(r["deformation_trace"])) / CONTROL_FREQ
         rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
         color = "tab:green" if r["dsr_success"] else ("tab:red" if r["success"] else "0.6")
         ax.plot(t, rt, color=color, lw=0.8, alpha=0.8)
