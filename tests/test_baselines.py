@@ -654,7 +654,7 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     text = (tmp_path / "results.md").read_text()
     assert "| object_soft | ID | vo-c (x) | 11 | 36.4 [" in text and "no successes" in text
     assert "| object_soft/id/vo-c (x) | 4 | 0 | 6 | 0 | 0 | 1 | 1 | 0 | 0.500 |" in text  # one squeeze past tolerance, no collapse
-    assert "| 0 | 36 / 27 of 11 |" in text  # per task, beside the other variants
+    assert "| 0 (soft_pastry001) | 36 / 27 of 11 |" in text  # per task, beside today's other variants
     # Paired on seeds 0-4: vo-c (x) succeeded in 4 the vt-b never did; exact McNemar 2 * (1/2)^4.
     pair = data["comparisons"]["object_soft/id: vo-c (x) vs vt-b (z)"]["success"]
     assert (pair["pairs"], pair["only_a"], pair["only_b"], pair["neither"]) == (5, 4, 0, 1)

@@ -83,17 +83,22 @@ def grouped(records: list[dict], legacy: list[dict] = ()) -> dict[tuple[str, str
 
 
 def per_task_lines(groups: dict) -> list[str]:
-    """TSR / DSR (%) of each task, one column per variant."""
-    keys = sorted(groups)
+    """TSR / DSR (%) of each task, one column per variant of today's physics (the legacy rows keep
+    their per-task tables beside their records)."""
+    from ..tasks.suites import task_spec
+
+    keys = sorted(k for k in groups if not k[2].endswith("[old physics]"))
     per = {k: {t[0]: s for t, s in group_summaries(groups[k], ("task_id",)).items()} for k in keys}
     tasks = sorted({t for k in keys for t in per[k]})
+    suites = {k[0] for k in keys}
     several = len({k[:2] for k in keys}) > 1  # task numbers are per suite: name it where there are several
     names = [f"{k[0]}/{k[1]}/{k[2]}" if several else k[2] for k in keys]
     lines = ["| task | " + " | ".join(f"{n} TSR / DSR %" for n in names) + " |", "|---" * (len(keys) + 1) + "|"]
     for t in tasks:
         cells = [f"{percent(per[k][t]['tsr'], 0)} / {percent(per[k][t]['dsr'], 0)} of {per[k][t]['episodes']}"
                  if t in per[k] else "-" for k in keys]
-        lines.append(f"| {t} | " + " | ".join(cells) + " |")
+        label = f"{t} ({task_spec(next(iter(suites)), t).asset_id})" if len(suites) == 1 else str(t)
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -138,7 +143,7 @@ def plot_success_traces(groups: dict, out: Path) -> Path | None:
     peak = max(r["r_max"] for _, recs in today for r in recs)
     for ax, ((suite, condition, label), recs) in zip(axes[0], today):
         within = sum(bool(r["dsr_success"]) for r in recs)
-        for r in sorted(recs, key=lambda r: r["dsr_success"]):  # the red ones under the green
+        for r in sorted(recs, key=lambda r: not r["dsr_success"]):  # the fewer red ones on top
             rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
             ax.plot(np.arange(len(rt)) / CONTROL_FREQ, rt, lw=0.6, alpha=0.35,
                     color="tab:green" if r["dsr_success"] else "tab:red")
