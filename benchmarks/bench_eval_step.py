@@ -19,6 +19,11 @@ is what the skipping saves.
 
 ``x PickCube`` divides by a PickCube-v1 control step (physics and one camera at the same size,
 random actions) measured in this run, so machines compare.
+
+An episode also begins with a reset. Every reset rebuilds the scene (``reconfiguration_freq=1``,
+the default), which makes an episode independent of what ran before it in the env; the reset is
+timed in ``rgb+tactile`` with the rebuild, with a plain reset (``reconfiguration_freq=0``) and
+beside a PickCube-v1 reset that rebuilds its scene too.
 """
 
 from __future__ import annotations
@@ -68,6 +73,37 @@ def replay(task: int, seed: int, actions, obs_mode: str, camera: int, read=None)
     ms = 1e3 * (time.perf_counter() - t0) / (len(actions) - 1)
     env.close()
     return ms, obs
+
+
+def reset_ms(task: int, seed: int, camera: int, rebuild: bool, resets: int) -> float:
+    """Milliseconds per ``env.reset(seed=...)`` in rgb+tactile, the scene rebuilt or not; the
+    first reset (the env's construction) outside the timing."""
+    from mani_skill_softvt.evaluation.wrapper import make_env
+
+    env = make_env("object_soft", task, obs_mode="rgb+tactile", camera_size=(camera, camera),
+                   reconfiguration_freq=1 if rebuild else 0)
+    env.reset(seed=seed)
+    t0 = time.perf_counter()
+    for i in range(resets):
+        env.reset(seed=seed + 1 + i)
+    ms = 1e3 * (time.perf_counter() - t0) / resets
+    env.close()
+    return ms
+
+
+def pickcube_reset_ms(camera: int, resets: int) -> float:
+    """Milliseconds per PickCube-v1 reset that rebuilds its scene, as ours do."""
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401
+
+    env = gym.make("PickCube-v1", obs_mode="rgb", reconfiguration_freq=1, sensor_configs={"width": camera, "height": camera})
+    env.reset(seed=0)
+    t0 = time.perf_counter()
+    for i in range(resets):
+        env.reset(seed=1 + i)
+    ms = 1e3 * (time.perf_counter() - t0) / resets
+    env.close()
+    return ms
 
 
 def pickcube_step(camera: int, steps: int = 40) -> float:
@@ -120,6 +156,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--camera", type=int, default=84, help="camera size (px, square) of the policy")
     ap.add_argument("--calls", type=int, default=10, help="policy calls timed")
     ap.add_argument("--task", type=int, default=3)
+    ap.add_argument("--resets", type=int, default=5, help="resets timed in each way")
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
@@ -129,7 +166,7 @@ def main(argv=None) -> dict:
     from mani_skill_softvt.baselines.config import make_config
 
     cfg = make_config("vt-c")
-    with tqdm(total=8, desc="benchmark", unit="row") as bar:
+    with tqdm(total=9, desc="benchmark", unit="row") as bar:
         actions = expert_actions(args.task, seed)
         bar.update()
         ms = {}
@@ -146,6 +183,10 @@ def main(argv=None) -> dict:
         vt = policy_costs("vt-c", last, args.calls)
         bar.update()
         pick = pickcube_step(args.camera)
+        bar.update()
+        resets = {"rebuilt": reset_ms(args.task, seed, args.camera, True, args.resets),
+                  "plain": reset_ms(args.task, seed, args.camera, False, args.resets),
+                  "pickcube": pickcube_reset_ms(args.camera, args.resets)}
         bar.update()
     physics = ms[("state_dict", args.camera)]
     cameras = ms[("rgb", args.camera)] - physics
@@ -172,11 +213,15 @@ def main(argv=None) -> dict:
     full = ms[("rgb+tactile", 224)]
     print(f"\nrgb+tactile step with 224-px cameras: {full:.1f} ms, at {args.camera} px: "
           f"{ms[('rgb+tactile', args.camera)]:.1f} ms (cut {1 - ms[('rgb+tactile', args.camera)] / full:.0%})")
+    print(f"\nreset (rgb+tactile, {args.camera} px), the scene rebuilt: {resets['rebuilt']:.0f} ms; plain: "
+          f"{resets['plain']:.0f} ms; PickCube-v1's, rebuilt: {resets['pickcube']:.0f} ms "
+          f"(x PickCube {resets['rebuilt'] / resets['pickcube']:.1f})")
     for what, step in (("every camera rendered", total_vt), ("cameras only where read", skipped)):
-        print(f"a 300-step vt-c episode, {what}: {300 * step / 1e3:.0f} s; the Object-Soft ID protocol "
-              f"(500 episodes, at most): {500 * 300 * step / 3.6e6:.1f} h per core")
+        episode = 300 * step / 1e3 + resets["rebuilt"] / 1e3
+        print(f"a 300-step vt-c episode with its reset, {what}: {episode:.0f} s; the Object-Soft ID protocol "
+              f"(500 episodes, at most): {500 * episode / 3.6e3:.1f} h per core")
     return {"ms": {f"{m}@{c}": v for (m, c), v in ms.items()}, "skipping_ms": skipping, "pickcube_ms": pick,
-            "vo": vo, "vt": vt}
+            "vo": vo, "vt": vt, "reset_ms": resets}
 
 
 if __name__ == "__main__":
