@@ -34,6 +34,7 @@ import os
 import pickle
 import signal
 import sys
+import threading
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -42,9 +43,12 @@ from queue import Empty
 RAY_INSTALL_HINT = "pip install 'mani-skill-softvt[ray]' (from a checkout: pip install -e '.[ray]')"
 # A work item is one core's job. A BLAS thread pool in each would spin against the other workers:
 # beside one other job, a reset's 1,296 small matrix inverses (Newton's tet builder) took 6-15 s
-# instead of 1.7 s. One BLAS thread gives the same records bit for bit (checked on the VO-C
-# records). A variable the caller has set is kept; Ray sets OMP_NUM_THREADS per task itself.
+# instead of 1.7 s, while a step, whose matrices are as small, gained nothing from the threads.
+# With one BLAS thread, 10 committed VO-C evaluation episodes were reproduced bit for bit. A
+# variable the caller has set is kept. Ray sets OMP_NUM_THREADS to a task's CPUs (one here)
+# unless it is set, and OpenBLAS falls back to it.
 WORKER_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_ENV_LOCK = threading.Lock()  # os.environ is the process's: two run_tasks in threads must not interleave
 POLL_S = 0.2
 _MESSAGE, _RESULT, _ERROR = "message", "result", "error"
 
@@ -190,13 +194,14 @@ def _run_local(fn: Callable, items: Sequence[tuple], workers: int,
 def _one_blas_thread():
     """The environment a spawned worker starts with (it reads it as it imports numpy): one BLAS
     and OpenMP thread unless the caller chose otherwise; this process's own is restored after."""
-    unset = [v for v in WORKER_THREAD_VARS if v not in os.environ]
-    os.environ.update({v: "1" for v in unset})
-    try:
-        yield
-    finally:
-        for v in unset:
-            os.environ.pop(v, None)
+    with _ENV_LOCK:
+        unset = [v for v in WORKER_THREAD_VARS if v not in os.environ]
+        os.environ.update({v: "1" for v in unset})
+        try:
+            yield
+        finally:
+            for v in unset:
+                os.environ.pop(v, None)
 
 
 def _signal_name(exitcode: int | None) -> str:

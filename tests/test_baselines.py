@@ -642,7 +642,8 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     with path.open("a") as fh:  # a dead worker's record: no variant in its receipt, no hash (an older record)
         fh.write(json.dumps({**died, "record_sha256": record_hash(died)}) + "\n")
     old.write_text("".join(json.dumps(rec("vo-c", i, False, 0.2)) + "\n" for i in range(3)))
-    data = report.main([str(path), "--legacy", str(old), "--out", str(tmp_path)])
+    out = report.main([str(path), "--legacy", str(old), "--out", str(tmp_path)])
+    data = out["rows"]
     vo = data["object_soft/id/vo-c (x)"]
     assert (vo["episodes"], vo["tsr"], vo["dsr"], vo["gap_share_of_successes"]) == (11, 4 / 11, 3 / 11, 0.25)
     assert vo["terminations"]["worker_died"] == 1
@@ -656,11 +657,18 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     assert "| object_soft/id/vo-c (x) | 4 | 0 | 6 | 0 | 0 | 1 | 1 | 0 | 0.500 |" in text  # one squeeze past tolerance, no collapse
     assert "| 0 (soft_pastry001) | 36 / 27 of 11 |" in text  # per task, beside today's other variants
     # Paired on seeds 0-4: vo-c (x) succeeded in 4 the vt-b never did; exact McNemar 2 * (1/2)^4.
-    pair = data["comparisons"]["object_soft/id: vo-c (x) vs vt-b (z)"]["success"]
+    pair = out["comparisons"]["object_soft/id: vo-c (x) vs vt-b (z)"]["success"]
     assert (pair["pairs"], pair["only_a"], pair["only_b"], pair["neither"]) == (5, 4, 0, 1)
     assert pair["p_value"] == pytest.approx(0.125) and pair["unpaired"] == 11 - 5
-    assert not any("old physics" in k for k in data["comparisons"])  # never compared across physics
+    assert not any("old physics" in k for k in out["comparisons"])  # never compared across physics
     assert (tmp_path / "success_traces.png").stat().st_size > 0
+    # Legacy records alone: no per-task table, no comparison, no figure (the stale one goes).
+    legacy_only = report.main(["--legacy", str(old), "--out", str(tmp_path)])
+    assert legacy_only["comparisons"] == {} and not (tmp_path / "success_traces.png").exists()
+    assert "Per task" not in (tmp_path / "results.md").read_text()
+    # The same records given twice would count twice: refused, naming the row and the episode.
+    with pytest.raises(SystemExit):
+        report.main([str(path), str(path), "--out", str(tmp_path)])
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):

@@ -89,11 +89,18 @@ class RidgeSolver:
             yield self.x[start:start + self.BLOCK].astype(np.float64) - self.mx
 
     def fit(self, y: np.ndarray, lam: float) -> tuple[np.ndarray, float]:
+        return self.fits(y, (lam,))[lam]
+
+    def fits(self, y: np.ndarray, lams) -> dict[float, tuple[np.ndarray, float]]:
+        """(weights, intercept) for each penalty in ``lams``: one pass over the input for all."""
         my = float(y.mean())
         yc = np.asarray(y, np.float64) - my
         rhs = sum(xc.T @ yc[i * self.BLOCK:(i + 1) * self.BLOCK] for i, xc in enumerate(self._blocks()))
-        w = np.linalg.solve(self.gram + lam * self.n * np.eye(len(self.gram)), rhs)
-        return w, my - float(self.mx @ w)
+        out = {}
+        for lam in lams:
+            w = np.linalg.solve(self.gram + lam * self.n * np.eye(len(self.gram)), rhs)
+            out[lam] = (w, my - float(self.mx @ w))
+        return out
 
 
 def r2(y: np.ndarray, pred: np.ndarray) -> float:
@@ -205,8 +212,10 @@ class Probe:
 
     def fit(self, y: np.ndarray) -> tuple[np.ndarray, float, float]:
         """(weights, intercept, lambda) for the target ``y`` of the training frames."""
+        fits = self.part.fits(y[self.fit_rows], LAMBDAS)
+
         def val_error(lam: float) -> float:
-            w, b = self.part.fit(y[self.fit_rows], lam)
+            w, b = fits[lam]
             return float(((self.x_val @ w + b - y[self.val_rows]) ** 2).mean())
 
         lam = min(LAMBDAS, key=val_error)

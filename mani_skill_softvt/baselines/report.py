@@ -25,12 +25,10 @@ import argparse
 import itertools
 from pathlib import Path
 
-import numpy as np
-
-from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
+from ..evaluation.metrics import group_summaries, is_dsr_success, paired_comparison, percent, percent_ci, summarize
+from ..evaluation.report import rt_series
 from ..evaluation.runner import policy_tag, read_records
 from ..fileio import atomic_write, atomic_write_json
-from ..physics.constants import CONTROL_FREQ
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
 # variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
@@ -42,6 +40,7 @@ PAPER_OBJECT_SOFT = {
 }
 
 
+LEGACY_MARK = " [old physics]"  # ends the row label of records made under an older physics or sensor
 ENDINGS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
 
 
@@ -69,36 +68,51 @@ def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
         label = base(r)
         if len(hashes[label]) > 1 and r.get("policy_sha256"):
             label += f" sha {r['policy_sha256'][:8]}"
-        out.append(label + (" [old physics]" if legacy else ""))
+        out.append(label + (LEGACY_MARK if legacy else ""))
     return out
 
 
+def is_legacy(key: tuple[str, str, str]) -> bool:
+    """The group (suite, condition, label) holds records made under an older physics or sensor."""
+    return key[2].endswith(LEGACY_MARK)
+
+
 def grouped(records: list[dict], legacy: list[dict] = ()) -> dict[tuple[str, str, str], list[dict]]:
-    """Records by (suite, condition, row label), today's first, the legacy rows marked."""
+    """Records by (suite, condition, row label), today's first, the legacy rows marked. An
+    episode twice in one row (overlapping files, say) is an error, not a double count."""
+    from ..evaluation.protocols import episode_key
+
     groups: dict[tuple[str, str, str], list[dict]] = {}
     for recs, old in ((records, False), (list(legacy), True)):
         for r, label in zip(recs, group_labels(recs, old)):
             groups.setdefault((r["suite"], r["condition"], label), []).append(r)
+    for key, recs in groups.items():
+        keys = [episode_key(r) for r in recs]
+        if len(set(keys)) < len(keys):
+            twice = next(k for k in keys if keys.count(k) > 1)
+            raise ValueError(f"row {key[2]!r}: episode {twice} (suite, task, condition, seed) is in the given records "
+                             f"twice; give each record file once")
     return groups
 
 
 def per_task_lines(groups: dict) -> list[str]:
-    """TSR / DSR (%) of each task, one column per variant of today's physics (the legacy rows keep
-    their per-task tables beside their records)."""
+    """Per suite of today's rows, TSR / DSR (%) of each task (with its object), one column per
+    variant (and protocol, where there are several); none for legacy rows, whose per-task tables
+    sit beside their records."""
     from ..tasks.suites import task_spec
 
-    keys = sorted(k for k in groups if not k[2].endswith("[old physics]"))
-    per = {k: {t[0]: s for t, s in group_summaries(groups[k], ("task_id",)).items()} for k in keys}
-    tasks = sorted({t for k in keys for t in per[k]})
-    suites = {k[0] for k in keys}
-    several = len({k[:2] for k in keys}) > 1  # task numbers are per suite: name it where there are several
-    names = [f"{k[0]}/{k[1]}/{k[2]}" if several else k[2] for k in keys]
-    lines = ["| task | " + " | ".join(f"{n} TSR / DSR %" for n in names) + " |", "|---" * (len(keys) + 1) + "|"]
-    for t in tasks:
-        cells = [f"{percent(per[k][t]['tsr'], 0)} / {percent(per[k][t]['dsr'], 0)} of {per[k][t]['episodes']}"
-                 if t in per[k] else "-" for k in keys]
-        label = f"{t} ({task_spec(next(iter(suites)), t).asset_id})" if len(suites) == 1 else str(t)
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines = []
+    for suite in sorted({k[0] for k in groups if not is_legacy(k)}):
+        keys = sorted(k for k in groups if k[0] == suite and not is_legacy(k))
+        per = {k: {t[0]: s for t, s in group_summaries(groups[k], ("task_id",)).items()} for k in keys}
+        several = len({k[1] for k in keys}) > 1
+        names = [f"{k[1]}/{k[2]}" if several else k[2] for k in keys]
+        lines += ["", f"Per task, {suite}:", "",
+                  "| task | " + " | ".join(f"{n} TSR / DSR %" for n in names) + " |", "|---" * (len(keys) + 1) + "|"]
+        for t in sorted({t for k in keys for t in per[k]}):
+            cells = [f"{percent(per[k][t]['tsr'], 0)} / {percent(per[k][t]['dsr'], 0)} of {per[k][t]['episodes']}"
+                     if t in per[k] else "-" for k in keys]
+            lines.append(f"| {t} ({task_spec(suite, t).asset_id}) | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -106,7 +120,7 @@ def comparisons(groups: dict) -> dict[str, dict]:
     """Every two of today's variants of one suite and protocol, paired on their common episodes:
     TSR and DSR."""
     out = {}
-    today = sorted(k for k in groups if not k[2].endswith("[old physics]"))
+    today = sorted(k for k in groups if not is_legacy(k))
     for a, b in itertools.combinations(today, 2):
         if a[:2] == b[:2]:
             pair = {o: paired_comparison(groups[a], groups[b], o) for o in ("success", "dsr_success")}
@@ -128,11 +142,13 @@ def comparison_lines(pairs: dict[str, dict]) -> list[str]:
 
 def plot_success_traces(groups: dict, out: Path) -> Path | None:
     """R_t of each of today's variants' successes against time, green within the tolerance, red
-    beyond it (R_max > 1 or a tet collapsed); None when no variant succeeded."""
+    beyond it (R_max > 1 or a tet collapsed). With no success to draw, no figure: a previous one
+    at ``out`` is removed (it would show other records) and None returned."""
     today = [(k, [r for r in groups[k] if r["success"] and r.get("deformation_trace")])
-             for k in sorted(groups) if not k[2].endswith("[old physics]")]
+             for k in sorted(groups) if not is_legacy(k)]
     today = [(k, recs) for k, recs in today if recs]
     if not today:
+        Path(out).unlink(missing_ok=True)
         return None
     import matplotlib
 
@@ -142,11 +158,9 @@ def plot_success_traces(groups: dict, out: Path) -> Path | None:
     fig, axes = plt.subplots(1, len(today), figsize=(4.2 * len(today), 3.4), squeeze=False, sharey=True)
     peak = max(r["r_max"] for _, recs in today for r in recs)
     for ax, ((suite, condition, label), recs) in zip(axes[0], today):
-        within = sum(bool(r["dsr_success"]) for r in recs)
-        for r in sorted(recs, key=lambda r: not r["dsr_success"]):  # the fewer red ones on top
-            rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
-            ax.plot(np.arange(len(rt)) / CONTROL_FREQ, rt, lw=0.6, alpha=0.35,
-                    color="tab:green" if r["dsr_success"] else "tab:red")
+        within = sum(is_dsr_success(r) for r in recs)
+        for r in sorted(recs, key=lambda r: not is_dsr_success(r)):  # the fewer red ones on top
+            ax.plot(*rt_series(r), lw=0.6, alpha=0.35, color="tab:green" if is_dsr_success(r) else "tab:red")
         ax.axhline(1.0, color="k", ls="--", lw=1)
         ax.set_title(f"{label}\n{suite} {condition}: {within} of {len(recs)} successes within tolerance", fontsize=8)
         ax.set_xlabel("time (s)")
@@ -161,9 +175,10 @@ def plot_success_traces(groups: dict, out: Path) -> Path | None:
     return out
 
 
-def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
-    groups = grouped(records, legacy)
-    data, lines = {}, []
+def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
+    """The report's markdown and its JSON: ``rows`` (one summary per row of the main table) and
+    ``comparisons`` (today's variants paired)."""
+    rows, lines = {}, []
     header = ("| suite | protocol | variant | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR % [95% CI] | share of successes % [95% CI] "
               "| paper TSR / DSR (model) |\n|---|---|---|---|---|---|---|---|---|")
     lines.append(header)
@@ -171,26 +186,28 @@ def build(records: list[dict], legacy: list[dict] = ()) -> tuple[str, dict]:
         s = summarize(recs)
         protocol = "ID" if condition == "id" else f"OOD {condition}"
         paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0].split(" ")[0]) if suite == "object_soft" and condition == "id" else None
-        data[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
+        rows[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
         lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
                      f"| {percent_ci(s['dsr'], s['dsr_ci95'])} | {percent_ci(s['gap'], s['gap_ci95'])} "
                      f"| {percent_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
                      f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
     columns = (*ENDINGS, "past tolerance (R_max > 1, collapsed or blown up), any end", "a tet collapsed", "median R_max")
     lines += ["", "| variant | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
-    for key, s in data.items():
+    for key, s in rows.items():
         ends = [str(s["terminations"].get(k, 0)) for k in ENDINGS]
         lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['collapses']} "
                      f"| {s['r_max_median']:.3f} |")
-    lines += ["", "Per task:", "", *per_task_lines(groups)]
+    lines += per_task_lines(groups)
     pairs = comparisons(groups)
     if pairs:
-        lines += ["", "Paired on the same episodes (p: exact McNemar, two-sided):", "", *comparison_lines(pairs)]
-    return "\n".join(lines) + "\n", {**data, "comparisons": pairs}
+        lines += ["", "Paired on the same episodes (p: exact McNemar, two-sided, each comparison on its own: "
+                  "no correction for making several):", "", *comparison_lines(pairs)]
+    return "\n".join(lines) + "\n", {"rows": rows, "comparisons": pairs}
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.report", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("records", nargs="*", type=Path, help="evaluation record files (JSONL)")
     ap.add_argument("--legacy", nargs="*", type=Path, default=[],
                     help="record files made under an older physics or sensor: rows of their own, marked [old physics]")
@@ -201,12 +218,16 @@ def main(argv=None) -> dict:
     legacy = [r for path in args.legacy for r in read_records(path)]
     if not records and not legacy:
         ap.error("no records in the given files")
-    text, data = build(records, legacy)
+    try:
+        groups = grouped(records, legacy)
+    except ValueError as e:
+        ap.error(str(e))
+    text, data = build(groups)
     out = args.out or (args.records or [args.legacy[0].parent.parent])[0]
     out = out.parent if out.suffix == ".jsonl" else out
     atomic_write(out / "results.md", lambda p: p.write_text(text))
     atomic_write_json(out / "results.json", data)
-    plot_success_traces(grouped(records, legacy), out / "success_traces.png")
+    plot_success_traces(groups, out / "success_traces.png")
     print(text)
     return data
 

@@ -42,6 +42,14 @@ def collapsed(record: dict) -> bool:
     return bool(record.get("collapsed_steps") or 0)
 
 
+def is_dsr_success(record: dict) -> bool:
+    """The record counts for DSR: its own ``dsr_success`` where it has one, else scored from its
+    success, R_max and collapse (records from before the field)."""
+    if "dsr_success" in record:
+        return bool(record["dsr_success"])
+    return dsr_success(record["success"], record["r_max"], collapsed(record))
+
+
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
     """95 % Wilson score interval of a binomial proportion (the default z)."""
     if n == 0:
@@ -82,7 +90,7 @@ def summarize(records: list[dict]) -> dict:
     """
     n = len(records)
     t = sum(bool(r["success"]) for r in records)
-    d = sum(bool(r.get("dsr_success", dsr_success(r["success"], r["r_max"], collapsed(r)))) for r in records)
+    d = sum(is_dsr_success(r) for r in records)
     if d > t:
         raise AssertionError("DSR exceeds TSR: a deformation-aware success must be a task success")
     tsr, dsr = (t / n, d / n) if n else (0.0, 0.0)
@@ -135,18 +143,21 @@ def mcnemar_exact_p(only_a: int, only_b: int) -> float:
 
 
 def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success") -> dict:
-    """Two policies on the same episodes (matched by suite, condition, task and seed): how many
-    pairs both / only A / only B / neither got ``outcome`` (``success`` or ``dsr_success``), the
-    difference of rates with its exact McNemar p-value. Pairing removes the seed-to-seed spread
-    that two independent intervals carry; episodes only one policy ran are left out and counted."""
-    key = lambda r: (r["suite"], r["condition"], r["task_id"], r["seed"])
-    a_by, b_by = {key(r): r for r in a}, {key(r): r for r in b}
+    """Two policies on the same episodes (matched by suite, task, condition and seed): how many
+    pairs both / only A / only B / neither got ``outcome`` (``success``, or ``dsr_success`` scored
+    by :func:`is_dsr_success`), the difference of rates with its exact McNemar p-value. Pairing
+    removes the seed-to-seed spread that two independent intervals carry; episodes only one
+    policy ran are left out and counted."""
+    from .protocols import episode_key
+
+    got = is_dsr_success if outcome == "dsr_success" else (lambda r: bool(r[outcome]))
+    a_by, b_by = {episode_key(r): r for r in a}, {episode_key(r): r for r in b}
     if len(a_by) < len(a) or len(b_by) < len(b):
-        raise ValueError("an episode (suite, condition, task, seed) appears twice in one policy's records")
+        raise ValueError("an episode (suite, task, condition, seed) appears twice in one policy's records")
     common = sorted(set(a_by) & set(b_by))
     counts = {"both": 0, "only_a": 0, "only_b": 0, "neither": 0}
     for k in common:
-        ga, gb = bool(a_by[k][outcome]), bool(b_by[k][outcome])
+        ga, gb = got(a_by[k]), got(b_by[k])
         counts["both" if ga and gb else "only_a" if ga else "only_b" if gb else "neither"] += 1
     n = len(common)
     return {"pairs": n, **counts, "unpaired": len(a_by) + len(b_by) - 2 * n,

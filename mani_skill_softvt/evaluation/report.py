@@ -9,7 +9,7 @@ import numpy as np
 from ..fileio import atomic_write, atomic_write_json
 from ..physics.constants import CONTROL_FREQ
 from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
-from .metrics import group_summaries, percent, percent_ci, summarize
+from .metrics import deformation_ratio, group_summaries, is_dsr_success, percent, percent_ci, summarize
 
 
 def _row(label: str, s: dict) -> str:
@@ -57,6 +57,13 @@ def write_report(records: list[dict], out_dir: Path, stem: str) -> tuple[Path, P
     return md, js
 
 
+def rt_series(record: dict) -> tuple[np.ndarray, np.ndarray]:
+    """A record's R_t trace against time (s): its stored D_t over its tolerance, one value per
+    control step."""
+    rt = deformation_ratio(np.asarray(record["deformation_trace"], np.float64), record["tau_o"])
+    return np.arange(len(rt)) / CONTROL_FREQ, rt
+
+
 def plot_traces(records: list[dict], out: Path) -> None:
     """R_t traces: successes within tolerance, successes beyond it, failures, coloured apart."""
     import matplotlib
@@ -68,10 +75,8 @@ def plot_traces(records: list[dict], out: Path) -> None:
     for r in records:
         if not r["deformation_trace"]:  # nothing measured (a worker died)
             continue
-        t = np.arange(len(r["deformation_trace"])) / CONTROL_FREQ
-        rt = np.asarray(r["deformation_trace"]) / r["tau_o"]
-        color = "tab:green" if r["dsr_success"] else ("tab:red" if r["success"] else "0.6")
-        ax.plot(t, rt, color=color, lw=0.8, alpha=0.8)
+        color = "tab:green" if is_dsr_success(r) else ("tab:red" if r["success"] else "0.6")
+        ax.plot(*rt_series(r), color=color, lw=0.8, alpha=0.8)
     ax.axhline(1.0, color="k", ls="--", lw=1)
     ax.plot([], [], color="tab:green", label="success, R_max <= 1, no tet collapsed")
     ax.plot([], [], color="tab:red", label="success beyond tolerance (R_max > 1 or a tet collapsed)")
