@@ -75,6 +75,14 @@ def replay(task: int, seed: int, actions, obs_mode: str, camera: int, read=None)
     return ms, obs
 
 
+def ms_per_reset(env, first_seed: int, resets: int) -> float:
+    """Milliseconds per ``env.reset`` over ``resets`` seeds from ``first_seed``."""
+    t0 = time.perf_counter()
+    for i in range(resets):
+        env.reset(seed=first_seed + i)
+    return 1e3 * (time.perf_counter() - t0) / resets
+
+
 def reset_ms(task: int, seed: int, camera: int, rebuild: bool, resets: int) -> float:
     """Milliseconds per ``env.reset(seed=...)`` in rgb+tactile, the scene rebuilt or not; the
     first reset (the env's construction) outside the timing."""
@@ -83,10 +91,7 @@ def reset_ms(task: int, seed: int, camera: int, rebuild: bool, resets: int) -> f
     env = make_env("object_soft", task, obs_mode="rgb+tactile", camera_size=(camera, camera),
                    reconfiguration_freq=1 if rebuild else 0)
     env.reset(seed=seed)
-    t0 = time.perf_counter()
-    for i in range(resets):
-        env.reset(seed=seed + 1 + i)
-    ms = 1e3 * (time.perf_counter() - t0) / resets
+    ms = ms_per_reset(env, seed + 1, resets)
     env.close()
     return ms
 
@@ -98,10 +103,7 @@ def pickcube_reset_ms(camera: int, resets: int) -> float:
 
     env = gym.make("PickCube-v1", obs_mode="rgb", reconfiguration_freq=1, sensor_configs={"width": camera, "height": camera})
     env.reset(seed=0)
-    t0 = time.perf_counter()
-    for i in range(resets):
-        env.reset(seed=1 + i)
-    ms = 1e3 * (time.perf_counter() - t0) / resets
+    ms = ms_per_reset(env, 1, resets)
     env.close()
     return ms
 
