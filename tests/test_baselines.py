@@ -346,7 +346,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
     # the demonstrated one than the untrained network's (in normalised units, where the action
     # box is [-1, 1] and an untrained sampler lands anywhere in it).
     _write_demos(tmp_path / "demos", lengths=(40,))
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
+    from mani_skill_softvt.baselines.model import noise_scheduler
 
     cfg = make_config("vo-c", **{**TINY, "steps": 400, "checkpoint_every": 400, "lr": 1e-3, "warmup_steps": 10,
                                  "unet_dims": (64, 128), "unet_groups": 8, "batch_size": 8})
@@ -726,3 +726,18 @@ def test_inference_fields_do_not_change_training(tmp_path):
     a = torch.load(T.train(cfg, tmp_path / "demos", tmp_path / "a", progress=False), weights_only=False)
     b = torch.load(T.train(other, tmp_path / "demos", tmp_path / "b", progress=False), weights_only=False)
     assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+
+
+def test_closure_summary_tells_one_held_closure_from_a_ratchet():
+    from mani_skill_softvt.baselines.closure import closure_summary, held_chunks
+
+    open_, k = [0.0] * 16, 8
+    expert = open_ + [0.6] * 40 + [0.0] * 8  # the expert: one closure for the whole hold
+    # a policy's closure rises chunk by chunk; its release chunk (half closed, half open) does not hold
+    ratchet = open_ + [v for v in (0.45, 0.55, 0.7, 0.85, 0.9) for _ in range(k)] + [0.9] * 4 + [0.0] * 12
+    assert held_chunks(expert, k, closed_at=0.2).tolist() == [0.6] * 5
+    s = closure_summary(expert, k, closed_at=0.2)
+    assert (s["held_chunks"], s["first"], s["last"], s["rise"], s["max"]) == (5, 0.6, 0.6, 0.0, 0.6)
+    s = closure_summary(ratchet, k, closed_at=0.2)
+    assert s["first"] == 0.45 and s["last"] == 0.9 and s["rise"] == pytest.approx(0.45) and s["max"] == 0.9
+    assert closure_summary(open_, k, closed_at=0.2)["first"] is None  # never held: nothing to summarise
