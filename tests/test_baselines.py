@@ -731,13 +731,42 @@ def test_inference_fields_do_not_change_training(tmp_path):
 def test_closure_summary_tells_one_held_closure_from_a_ratchet():
     from mani_skill_softvt.baselines.closure import closure_summary, held_chunks
 
-    open_, k = [0.0] * 16, 8
-    expert = open_ + [0.6] * 40 + [0.0] * 8  # the expert: one closure for the whole hold
-    # a policy's closure rises chunk by chunk; its release chunk (half closed, half open) does not hold
-    ratchet = open_ + [v for v in (0.45, 0.55, 0.7, 0.85, 0.9) for _ in range(k)] + [0.9] * 4 + [0.0] * 12
-    assert held_chunks(expert, k, closed_at=0.2).tolist() == [0.6] * 5
-    s = closure_summary(expert, k, closed_at=0.2)
-    assert (s["held_chunks"], s["first"], s["last"], s["rise"], s["max"]) == (5, 0.6, 0.6, 0.0, 0.6)
-    s = closure_summary(ratchet, k, closed_at=0.2)
+    k = 8
+    # The expert: one closure for the whole hold. The object is held from the closing chunk's
+    # third step on, so that chunk is not a held one.
+    expert = [0.0] * 10 + [0.6] * 46 + [0.0] * 8
+    expert_held = [False] * 18 + [True] * 38 + [False] * 8
+    assert held_chunks(expert, expert_held, k).tolist() == [0.6] * 4
+    s = closure_summary(expert, expert_held, k)
+    assert (s["held_chunks"], s["first"], s["last"], s["rise"], s["max"]) == (4, 0.6, 0.6, 0.0, 0.6)
+    # A policy's closure rising chunk by chunk; its release chunk (half closed) and the open steps
+    # after it, whose closure is irrelevant, do not count; nor does a spike while not holding.
+    ratchet = [0.95] * 8 + [v for v in (0.45, 0.55, 0.7, 0.85, 0.9) for _ in range(k)] + [0.9] * 4 + [0.0] * 9
+    held = [False] * 8 + [True] * 44 + [False] * 9
+    s = closure_summary(ratchet, held, k)
     assert s["first"] == 0.45 and s["last"] == 0.9 and s["rise"] == pytest.approx(0.45) and s["max"] == 0.9
-    assert closure_summary(open_, k, closed_at=0.2)["first"] is None  # never held: nothing to summarise
+    # The episode's last chunk may be short (the episode ends mid-chunk) and still held.
+    s = closure_summary([0.5] * 8 + [0.7] * 3, [True] * 11, k)
+    assert (s["held_chunks"], s["last"]) == (2, 0.7)
+    assert closure_summary([0.0] * 16, [False] * 16, k)["first"] is None  # never held: nothing to summarise
+    with pytest.raises(ValueError, match="differ in length"):
+        held_chunks([0.5] * 8, [True] * 7, k)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["nowhere.pt"], "not a policy file"),
+    (["{policy}", "--task", "10"], "--task must be in"),
+    (["{policy}", "--episodes", "0"], "--episodes must be in"),
+    (["{policy}", "--episodes", "51"], "--episodes must be in"),
+    (["{committed}", "{committed}"], "two policies are named"),
+])
+def test_closure_refuses_bad_input_before_running_anything(tmp_path, capsys, args, message):
+    from mani_skill_softvt.baselines import closure
+
+    policy = tmp_path / "p.pt"
+    policy.write_bytes(b"")  # never read: the range checks come before the policy file is needed
+    committed = Path(__file__).resolve().parents[1] / "baselines" / "policies" / "vo-c-cpu.pt"
+    argv = [a.format(policy=policy, committed=committed) for a in args]
+    with pytest.raises(SystemExit):
+        closure.main(argv)
+    assert message in capsys.readouterr().err

@@ -5,12 +5,17 @@
 
 The scripted expert draws one closure per episode, uniform in the object's calibrated envelope
 [g_min, g_max], and commands it at once for the whole hold (``expert.pick_place``). A learned
-policy commands its closure afresh in every chunk. This runs each policy on the first
-``--episodes`` ID seeds of a task as ``evaluate`` does (the same env, rollout and modes, cameras
-only where read, so R_max equals the committed record's) and keeps every step's commanded
-closure (the action's last entry) and R_t. It writes ``closure_task<T>.json`` and
-``closure_task<T>.png`` (closure and R_t over time, one column per policy; the expert's draw for
-each seed dashed) and prints per episode the closure of the first and last held chunks.
+policy commands its closure afresh in every chunk. This runs each policy (one worker each, one
+BLAS thread, as evaluation workers do) on the first ``--episodes`` ID seeds of a task through the
+evaluator's own episode (:func:`~mani_skill_softvt.evaluation.runner.run_episode`), and keeps
+every step's commanded closure (the action's gripper column) and whether the object was held.
+Each episode's record is checked against the policy's committed ID records in ``--records``
+(``evaluate``'s files), which it must match bit for bit.
+
+It writes ``closure_task<T>.json`` (the closures, R_t, the summaries below, each policy's SHA-256)
+and ``closure_task<T>.png`` (closure and R_t over time, one column per policy; the expert's draw
+for each seed dashed), and prints per episode the closure of the first and last chunks that held
+the object.
 """
 
 from __future__ import annotations
@@ -21,127 +26,192 @@ from pathlib import Path
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
+from ..rollout import Observer
 
 
-def held_chunks(closure, chunk: int, closed_at: float) -> np.ndarray:
-    """Median commanded closure of each ``chunk``-step chunk closed at least to ``closed_at`` in
-    every step, in order: the chunks that hold the object, not those that close or release it."""
-    closure = np.asarray(closure, np.float64)
-    chunks = [closure[i:i + chunk] for i in range(0, len(closure), chunk)]
-    return np.array([np.median(c) for c in chunks if c.min() >= closed_at])
+def held_chunks(closure, held, chunk: int) -> np.ndarray:
+    """Median commanded closure of each ``chunk``-step chunk (the agent replans every ``chunk``
+    steps from the episode's first) in which the object was held at every step, in order: the
+    chunks that hold it, not those that close on it or let go. The last chunk may be shorter."""
+    closure, held = np.asarray(closure, np.float64), np.asarray(held, bool)
+    if closure.shape != held.shape:
+        raise ValueError(f"closure and held differ in length: {closure.shape} and {held.shape}")
+    starts = range(0, len(closure), chunk)
+    return np.array([np.median(closure[i:i + chunk]) for i in starts if held[i:i + chunk].all()])
 
 
-def closure_summary(closure, chunk: int, closed_at: float) -> dict:
-    """The commanded closure while holding: its first and last held chunk, its largest step, and the
-    rise between them (a policy that holds one closure, as the expert does, rises by 0)."""
-    held = held_chunks(closure, chunk, closed_at)
-    if len(held) == 0:
+def closure_summary(closure, held, chunk: int) -> dict:
+    """The commanded closure while the object was held: the first and last held chunk, the rise
+    between them (0 for a policy that holds one closure, as the expert does) and the largest
+    closure of any held step."""
+    medians = held_chunks(closure, held, chunk)
+    if len(medians) == 0:
         return {"held_chunks": 0, "first": None, "last": None, "rise": None, "max": None}
-    return {"held_chunks": int(len(held)), "first": float(held[0]), "last": float(held[-1]),
-            "rise": float(held[-1] - held[0]), "max": float(np.max(closure))}
+    held_closure = np.asarray(closure, np.float64)[np.asarray(held, bool)]
+    return {"held_chunks": int(len(medians)), "first": float(medians[0]), "last": float(medians[-1]),
+            "rise": float(medians[-1] - medians[0]), "max": float(held_closure.max())}
 
 
-def run(policy_spec: str, task: int, seeds: list[int], progress=None) -> list[dict]:
-    """Each seed's episode of the policy, as ``evaluate`` runs it, with its closure and R_t per step."""
-    from ..evaluation.policies import load_policy, policy_camera_size
-    from ..evaluation.report import rt_series
+class ClosureLog(Observer):
+    """Each step's commanded closure and whether the env said the object was held."""
+
+    def __init__(self, gripper_column: int):
+        self.gripper_column = gripper_column
+        self.closure: list[float] = []
+        self.held: list[bool] = []
+
+    def on_step(self, env, action, obs, info):
+        from ..observations import info_bool
+
+        self.closure.append(float(np.asarray(action)[self.gripper_column]))
+        self.held.append(info_bool(info, "is_grasped"))
+
+
+def _run(policy_spec: str, episodes: list[dict], obs_mode: str, control_mode: str, camera_size, policy_sha256,
+         queue) -> list[dict]:
+    """A worker: each episode of ``policy_spec`` as the evaluator runs it, with its closure log."""
+    from ..evaluation.policies import load_policy
+    from ..evaluation.runner import run_episode
     from ..evaluation.wrapper import make_env
     from ..expert.pick_place import draw_closure
-    from ..rollout import Observer, rollout
-    from .agent import required_modes
+    from .agent import GRIPPER
 
-    obs_mode, control_mode = required_modes(Path(policy_spec))
     policy = load_policy(policy_spec)
-    env = make_env("object_soft", task, obs_mode=obs_mode, control_mode=control_mode,
-                   camera_size=policy_camera_size(policy_spec))
-    episodes = []
+    env = make_env(episodes[0]["suite"], episodes[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
+                   camera_size=camera_size)
+    out = []
     try:
-        for seed in seeds:
-            closure = []
-
-            class Closure(Observer):
-                def on_step(self, env, action, obs, info):
-                    closure.append(float(np.asarray(action)[-1]))
-
-            ep = rollout(env, policy, seed, observers=[Closure()], until="episode", skip_unread_cameras=True)
+        for ep in episodes:
+            log = ClosureLog(GRIPPER)
+            record = run_episode(env, policy, ep, policy_spec=policy_spec, policy_sha256=policy_sha256,
+                                 observers=[log])
             card = env.calibration_card
-            _, rt = rt_series({"deformation_trace": env.deformation_trace, "tau_o": env.tau_o})
-            episodes.append({"seed": seed, "termination": ep.termination, "r_max": float(env.r_max),
-                             "expert_closure": draw_closure(card, seed), "g_min": card.g_min, "g_max": card.g_max,
-                             "closure": closure, "r_t": [float(v) for v in rt]})
-            if progress is not None:
-                progress()
+            out.append({"record": record, "closure": log.closure, "held": log.held,
+                        "expert_closure": draw_closure(card, ep["seed"]), "g_min": card.g_min, "g_max": card.g_max})
+            queue.put(ep["seed"])
     finally:
         env.close()
-    return episodes
+    return out
+
+
+def summary_rows(episodes: list[dict], chunk: int) -> list[dict]:
+    """Per episode: seed, ending, R_max, the expert's draw and :func:`closure_summary`."""
+    return [{"seed": e["record"]["seed"], "termination": e["record"]["termination"], "r_max": e["record"]["r_max"],
+             "expert_closure": e["expert_closure"], **closure_summary(e["closure"], e["held"], chunk)}
+            for e in episodes]
 
 
 def plot(results: dict[str, list[dict]], task: int, out: Path) -> None:
-    """Closure (top) and R_t (bottom) over time, one column per policy."""
+    """Closure (top) and R_t (bottom) over time, one column per policy, one colour per seed."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..evaluation.report import rt_series
     from ..physics.constants import CONTROL_FREQ
 
-    fig, axes = plt.subplots(2, len(results), figsize=(4.6 * len(results), 5.6), squeeze=False, sharex=True,
+    fig, axes = plt.subplots(2, len(results), figsize=(4.6 * len(results), 5.8), squeeze=False, sharex=True,
                              sharey="row")
     for col, (name, episodes) in enumerate(results.items()):
         top, bottom = axes[0][col], axes[1][col]
         for i, e in enumerate(episodes):
             color = f"C{i % 10}"
-            top.plot(np.arange(1, len(e["closure"]) + 1) / CONTROL_FREQ, e["closure"], color=color, lw=1)
+            top.plot(np.arange(1, len(e["closure"]) + 1) / CONTROL_FREQ, e["closure"], color=color, lw=1,
+                     label=str(e["record"]["seed"]))
             top.axhline(e["expert_closure"], color=color, ls="--", lw=0.8)
-            bottom.plot(np.arange(len(e["r_t"])) / CONTROL_FREQ, e["r_t"], color=color, lw=1)
-        g_max = episodes[0]["g_max"] if episodes else None
-        if g_max is not None:
-            top.axhline(g_max, color="k", lw=0.8, ls=":")
+            bottom.plot(*rt_series(e["record"]), color=color, lw=1)
+        top.axhline(episodes[0]["g_max"], color="k", lw=0.8, ls=":")
         bottom.axhline(1.0, color="k", ls="--", lw=1)
         top.set_title(f"{name}, object_soft task {task}\ncommanded closure (dashed: the expert's draw; "
                       "dotted: g_max)", fontsize=8)
         bottom.set_title("R_t = D_t / tau_o", fontsize=8)
         bottom.set_xlabel("time (s)")
+    axes[0][0].legend(fontsize=6, title="seed", title_fontsize=6, loc="lower right")
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
     plt.close(fig)
 
 
 def main(argv=None) -> dict:
+    from ..data.seeds import ID_EPISODES_PER_TASK
+    from ..tasks.suites import NUM_TASKS
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("policies", nargs="+", help="trained policy files (policy.pt)")
+    ap.add_argument("policies", nargs="+", help="trained policy files (a run's policy.pt or an exported .pt)")
     ap.add_argument("--task", type=int, default=3, help="Object-Soft task (default 3, the soft cube)")
-    ap.add_argument("--episodes", type=int, default=6, help="the first N ID seeds of the task")
-    ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    ap.add_argument("--episodes", type=int, default=6, help=f"the first N ID seeds of the task (1-{ID_EPISODES_PER_TASK})")
+    ap.add_argument("--records", type=Path, default=Path("baselines/results"),
+                    help="where the policies' ID records are, to check each episode against")
+    ap.add_argument("--out", type=Path, default=Path("outputs/closure"))
     args = ap.parse_args(argv)
+    if not 0 <= args.task < NUM_TASKS:
+        ap.error(f"--task must be in [0, {NUM_TASKS - 1}], got {args.task}")
+    if not 1 <= args.episodes <= ID_EPISODES_PER_TASK:
+        ap.error(f"--episodes must be in [1, {ID_EPISODES_PER_TASK}] (the ID protocol's seeds), got {args.episodes}")
+    from ..evaluation.policies import policy_camera_size
+    from ..evaluation.protocols import episode_key, episodes
+    from ..evaluation.runner import policy_file_sha256, policy_tag, record_differences, records_stem, run_records
+    from .agent import read_policy_file, required_modes
+
+    configs = {}
     for spec in args.policies:
         if not spec.endswith(".pt") or not Path(spec).is_file():
-            ap.error(f"{spec}: not a policy file; give the policy.pt of a trained baseline")
+            ap.error(f"{spec}: not a policy file; give the policy.pt of a trained baseline or an exported .pt")
+        try:
+            obs_mode, control_mode = required_modes(Path(spec))
+            cfg, _ = read_policy_file(Path(spec))
+        except (FileNotFoundError, ValueError) as e:
+            ap.error(f"{spec}: {e}")
+        if cfg.binary_gripper:
+            ap.error(f"{spec} commands a binary gripper (open or closed): it has no closure to follow")
+        if policy_tag(spec) in configs:
+            ap.error(f"two policies are named {policy_tag(spec)}; give each once, from differently named files")
+        configs[policy_tag(spec)] = (spec, obs_mode, control_mode, policy_camera_size(spec), policy_file_sha256(spec),
+                                     cfg.action_steps)
     from tqdm import tqdm
 
-    from ..data.seeds import id_seed
-    from .agent import read_policy_file
+    from ..parallel import run_tasks
 
-    seeds = [id_seed(args.task, i) for i in range(args.episodes)]
+    eps = episodes("object_soft", "id", [args.task], args.episodes)
+    items = [(spec, eps, obs, control, size, sha) for spec, obs, control, size, sha, _ in configs.values()]
     results = {}
-    with tqdm(total=len(seeds) * len(args.policies), desc="closure", unit="episode") as bar:
-        for spec in args.policies:
-            results[Path(spec).stem] = run(spec, args.task, seeds, progress=bar.update)
+    with tqdm(total=len(eps) * len(items), desc="closure", unit="episode") as bar:
+        for kind, value in run_tasks(_run, items, workers=len(items)):
+            if kind == "message":
+                bar.update()
+            else:
+                tag = policy_tag(value[0]["record"]["policy"])
+                results[tag] = value
+    results = {tag: results[tag] for tag in configs}  # in the order given
+    report = {"task": args.task, "policies": {}}
+    for tag, episodes_run in results.items():
+        spec, obs, control, size, sha, chunk = configs[tag]
+        stored = run_records(args.records / f"{records_stem('object_soft', 'id', spec)}.jsonl", spec, obs, control,
+                             size, sha)
+        differing = {e["record"]["seed"]: record_differences(stored[episode_key(e["record"])], e["record"])
+                     for e in episodes_run if episode_key(e["record"]) in stored}
+        rows = summary_rows(episodes_run, chunk)
+        report["policies"][tag] = {"policy_sha256": sha, "chunk": chunk, "summary": rows, "episodes": episodes_run,
+                                   "records_checked": len(differing),
+                                   "records_differing": {s: d for s, d in differing.items() if d}}
+        print(f"\n{tag}: median commanded closure of the first and last chunk of {chunk} steps that held the "
+              "object, the largest held closure")
+        print(f"{'seed':>10} {'ending':>9} {'R_max':>6} {'expert':>7} {'first':>6} {'last':>6} {'max':>6}")
+        for r in rows:
+            cells = [f"{r[k]:>6.2f}" if r[k] is not None else f"{'-':>6}" for k in ("first", "last", "max")]
+            print(f"{r['seed']:>10} {r['termination']:>9} {r['r_max']:>6.2f} {r['expert_closure']:>7.2f} {' '.join(cells)}")
+        bad = report["policies"][tag]["records_differing"]
+        print(f"checked against {len(differing)} committed records of {args.records}: "
+              + (f"{len(bad)} differ ({bad})" if bad else "the same, bit for bit"))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"closure_task{args.task}"
-    atomic_write_json(stem.with_suffix(".json"), {"task": args.task, "policies": results})
+    atomic_write_json(stem.with_suffix(".json"), report)
     plot(results, args.task, stem.with_suffix(".png"))
-    for name, episodes in results.items():
-        cfg, _ = read_policy_file(Path(next(p for p in args.policies if Path(p).stem == name)))
-        print(f"\n{name}: median closure of the first and last chunk of {cfg.action_steps} steps that hold "
-              "(every step closed to at least g_min / 2), and the largest step")
-        print(f"{'seed':>10} {'ending':>9} {'R_max':>6} {'expert':>7} {'first':>6} {'last':>6} {'max':>6}")
-        for e in episodes:
-            s = closure_summary(e["closure"], cfg.action_steps, e["g_min"] / 2)
-            cells = [f"{s[k]:>6.2f}" if s[k] is not None else f"{'-':>6}" for k in ("first", "last", "max")]
-            print(f"{e['seed']:>10} {e['termination']:>9} {e['r_max']:>6.2f} {e['expert_closure']:>7.2f} {' '.join(cells)}")
     print(f"\n{stem.with_suffix('.json')}  {stem.with_suffix('.png')}")
-    return results
+    if any(p["records_differing"] for p in report["policies"].values()):
+        raise SystemExit(1)
+    return report
 
 
 if __name__ == "__main__":

@@ -154,14 +154,16 @@ def _seal(rec: dict) -> dict:
 
 
 def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None,
-                policy_sha256: str | None = None) -> dict:
+                policy_sha256: str | None = None, observers=()) -> dict:
     """One episode of ``policy`` on a DSR-wrapped env (a :func:`~mani_skill_softvt.rollout.rollout`
     that the env ends); the record with its audit receipt.
 
     Never raises for what the policy does (see the module docstring for the terminations).
     ``on_step(obs, info)``, if given, sees the reset and every step (episode videos use it).
     ``policy_spec`` is how the policy was named to the evaluator (default: its ``name``);
-    ``policy_sha256``, the hash of its file if it is one (kept in the record).
+    ``policy_sha256``, the hash of its file if it is one (kept in the record). ``observers``
+    (:class:`~mani_skill_softvt.rollout.Observer`) watch the rollout without changing it: the
+    cameras still render only where the policy reads them.
     """
     from ..rollout import Observer, rollout
 
@@ -177,7 +179,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     t0 = time.perf_counter()
     # Cameras render only where the policy reads them; a video (on_step) shows every step's.
     ep = rollout(env, policy, int(episode["seed"]), options=options, replan_steps=replan_steps,
-                 observers=[Callback()] if on_step is not None else [], until="episode",
+                 observers=[*observers, *([Callback()] if on_step is not None else [])], until="episode",
                  skip_unread_cameras=on_step is None)
     info = ep.info
     material = u.object_material(u.target_instance)
