@@ -149,10 +149,9 @@ def main(argv=None) -> dict:
         ap.error(f"--task must be in [0, {NUM_TASKS - 1}], got {args.task}")
     if not 1 <= args.episodes <= ID_EPISODES_PER_TASK:
         ap.error(f"--episodes must be in [1, {ID_EPISODES_PER_TASK}] (the ID protocol's seeds), got {args.episodes}")
-    from ..evaluation.policies import policy_camera_size
     from ..evaluation.protocols import episode_key, episodes
     from ..evaluation.runner import policy_file_sha256, policy_tag, record_differences, records_stem, run_records
-    from .agent import read_policy_file, required_modes
+    from .agent import camera_render_size, read_policy_file, required_modes
 
     configs = {}
     for spec in args.policies:
@@ -160,14 +159,14 @@ def main(argv=None) -> dict:
             ap.error(f"{spec}: not a policy file; give the policy.pt of a trained baseline or an exported .pt")
         try:
             obs_mode, control_mode = required_modes(Path(spec))
-            cfg, _ = read_policy_file(Path(spec))
+            cfg, ckpt = read_policy_file(Path(spec))  # the config and camera size from one read
         except (FileNotFoundError, ValueError) as e:
             ap.error(f"{spec}: {e}")
         if cfg.binary_gripper:
             ap.error(f"{spec} commands a binary gripper (open or closed): it has no closure to follow")
         if policy_tag(spec) in configs:
             ap.error(f"two policies are named {policy_tag(spec)}; give each once, from differently named files")
-        configs[policy_tag(spec)] = (spec, obs_mode, control_mode, policy_camera_size(spec), policy_file_sha256(spec),
+        configs[policy_tag(spec)] = (spec, obs_mode, control_mode, camera_render_size(ckpt), policy_file_sha256(spec),
                                      cfg.action_steps)
     from tqdm import tqdm
 
