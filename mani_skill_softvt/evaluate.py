@@ -170,6 +170,15 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         named = [f if gap is None else f"{f} (by at most {gap:.1e} relative)" for f, gap in gaps]
         print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
     print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
+    from .stack import software_stack, stack_differences
+
+    other = stack_differences(results[0][0]["receipt"].get("stack"), software_stack()) if results else []
+    if other:
+        print(f"the records were made on another stack ({'; '.join(other)}): the same episode keeps its outcome "
+              "there, not its bits, so compare rates rather than records")
+    elif results and "stack" not in results[0][0]["receipt"]:
+        print("the records predate the stack being recorded: if they differ, compare the stack they were made on "
+              "(docs/evaluation.md) with this one")
     if differing:
         raise SystemExit(1)
     return {"reproduced": len(results)}

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from mani_skill_softvt.evaluation.runner import evaluate, record_hash
@@ -34,6 +35,10 @@ def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube
         assert r["record_sha256"] == record_hash({k: v for k, v in r.items() if k != "wall_s"})
         receipt = r["receipt"]
         assert receipt["privileged"] and receipt["light_intensity"] == pytest.approx(135.0)
+        # The record names the stack it ran on: what a reproduction elsewhere compares against.
+        import torch
+
+        assert receipt["stack"]["torch"] == torch.__version__ and receipt["stack"]["numpy"] == np.__version__
         assert len(r["deformation_trace"]) == r["steps"] + 1  # reset + every step
     json.dumps(full)  # records are plain JSON
 
@@ -44,7 +49,9 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
     from mani_skill_softvt import evaluate as evaluate_cli
 
     _, full, _ = soft_cube_expert_run
-    edited = dict(full[0], r_max=full[0]["r_max"] + 0.5)
+    # Its receipt also names another torch: the stack is reported as the reason, not as a difference.
+    edited = dict(full[0], r_max=full[0]["r_max"] + 0.5,
+                  receipt={**full[0]["receipt"], "stack": {**full[0]["receipt"]["stack"], "torch": "0.0.0"}})
     edited["record_sha256"] = record_hash(edited)
     path = tmp_path / "object_soft_id_expert.jsonl"
     path.write_text(json.dumps(edited) + "\n")
@@ -53,7 +60,8 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
     assert stop.value.code == 1
     out = capsys.readouterr().out
     assert "task 3 id" in out and "differs in r_max (by at most" in out and "0 of 1 episodes" in out
-    assert "deformation_trace" not in out  # everything else the same, bit for bit
+    assert "deformation_trace" not in out and "receipt" not in out  # everything else the same, bit for bit
+    assert "another stack (torch 0.0.0 -> " in out
 
 
 def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):

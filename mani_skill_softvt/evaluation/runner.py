@@ -42,6 +42,7 @@ from .. import __version__
 from ..fileio import append_jsonl, read_jsonl_lines
 from ..observations import info_bool
 from ..parallel import WorkerDiedError, run_tasks
+from ..stack import software_stack
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .protocols import episode_key
 
@@ -187,7 +188,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     receipt = {"youngs_modulus": None if e is None else float(e), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
-               "privileged": ep.privileged}
+               "privileged": ep.privileged, "stack": software_stack()}
     success = ep.termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
@@ -209,7 +210,7 @@ def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) ->
            "camera_size": recorded_camera_size(config["obs_mode"], config.get("camera_size")),
            "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
            "steps": None, "r_max": None, "collapsed_steps": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
-           "receipt": {"package_version": __version__, "privileged": False}}
+           "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack()}}
     if rec.get("policy_sha256", "") is None:
         del rec["policy_sha256"]  # kept only for policy files, as in run_episode
     return _seal(rec)
@@ -307,6 +308,9 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
 
 RUN_FIELDS = ("policy", "obs_mode", "control_mode", "camera_size", "policy_sha256")  # what names a run
 NOT_REPRODUCED = ("wall_s", "record_sha256")  # the wall time differs run to run, and with it the hash
+# The stack a record names is not a result: a reproduction on another stack reports it as the reason
+# its bits may differ (evaluate --reproduce), not as a difference of the episode.
+NOT_COMPARED_IN_RECEIPT = ("stack",)
 
 
 def record_differences(stored: dict, new: dict) -> list[str]:
@@ -318,7 +322,9 @@ def record_differences(stored: dict, new: dict) -> list[str]:
             continue
         a, b = stored.get(k), new.get(k)
         if isinstance(a, dict) and isinstance(b, dict):
-            out += [f"{k}.{f}" for f in record_differences(a, b)]
+            inner = record_differences({f: v for f, v in a.items() if f not in NOT_COMPARED_IN_RECEIPT},
+                                       {f: v for f, v in b.items() if f not in NOT_COMPARED_IN_RECEIPT})
+            out += [f"{k}.{f}" for f in inner]
         elif a != b:
             out.append(k)
     return out

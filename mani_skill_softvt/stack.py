@@ -1,0 +1,39 @@
+"""The software stack a result was made on, named in every evaluation record.
+
+The same episode on another stack (another torch, NumPy, Warp, Newton or SAPIEN, another Python)
+keeps its outcome but not its bits; a record that names its stack lets ``evaluate --reproduce``
+say why a reproduction differs instead of leaving it unexplained.
+"""
+
+from __future__ import annotations
+
+import platform
+from functools import lru_cache
+from importlib import metadata
+
+from . import __version__
+
+# The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
+# policy's network (torch), the array maths (numpy) and ManiSkill's env glue.
+STACK_DISTRIBUTIONS = ("torch", "numpy", "warp-lang", "newton", "sapien", "mani-skill")
+
+
+@lru_cache(maxsize=1)
+def software_stack() -> dict[str, str]:
+    """``{"python": ..., "mani-skill-softvt": ..., "torch": ..., ...}`` of this process."""
+    out = {"python": platform.python_version(), "mani-skill-softvt": __version__}
+    for dist in STACK_DISTRIBUTIONS:
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def stack_differences(recorded: dict | None, current: dict) -> list[str]:
+    """``["torch 2.13.0 -> 2.11.0", ...]``: what differs between a recorded stack and this one
+    (empty when they are the same or the record predates stacks being recorded)."""
+    if not recorded:
+        return []
+    return [f"{k} {recorded.get(k)} -> {current.get(k)}" for k in sorted(set(recorded) | set(current))
+            if recorded.get(k) != current.get(k)]
