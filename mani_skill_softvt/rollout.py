@@ -82,7 +82,8 @@ def action_chunk(raw, env, replan_steps: int) -> list:
     return [env.validate_action(a) for a in chunk[:replan_steps]]
 
 
-def _episode_end(until: str, terminated, truncated, info) -> str | None:
+def episode_end(until: str, terminated, truncated, info) -> str | None:
+    """How a step ended the rollout (``success``, ``dropped``, ``timeout``), or None if it goes on."""
     if until == "episode" and (as_bool(terminated) or as_bool(truncated)):
         return "success" if info_bool(info, "success") else "dropped" if info_bool(info, "dropped") else "timeout"
     if until == "plan" and (as_bool(truncated) or info_bool(info, "fail")):
@@ -147,7 +148,7 @@ def rollout(env, policy, seed: int | None = None, *, options: dict | None = None
             if any(stop):
                 ep.termination = "stopped"
                 break
-            ep.termination = _episode_end(until, terminated, truncated, info)
+            ep.termination = episode_end(until, terminated, truncated, info)
             if ep.termination is not None:
                 break
         if ep.termination is None and until != "episode" and getattr(policy, "done", False):

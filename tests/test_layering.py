@@ -91,9 +91,10 @@ def test_one_flattener_and_one_info_reader():
 def test_one_episode_loop():
     """Evaluation episodes, expert demonstrations and calibration trials are rollouts
     (mani_skill_softvt/rollout.py); the only other env.step calls are the DSR wrapper passing a
-    step on, ManiSkill's action converters' signature (replay.py) and the kernel warm-up."""
+    step on, the LeRobot env passing on a step of LeRobot's own loop (lerobot-eval), ManiSkill's
+    action converters' signature (replay.py) and the kernel warm-up."""
     stepping = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "env.step(" in p.read_text())
-    assert stepping == ["evaluation/wrapper.py", "replay.py", "rollout.py", "warmup.py"]
+    assert stepping == ["evaluation/lerobot_env.py", "evaluation/wrapper.py", "replay.py", "rollout.py", "warmup.py"]
 
 
 def test_data_keeps_file_formats_and_does_not_plan():

@@ -26,7 +26,21 @@ import h5py
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_json
-from ..observations import CAMERAS, GRIPPER_WIDTH, MARKER_FIELDS, QPOS, QVEL, SIDES, TCP_POSE, camera_key, tactile_key
+from ..observations import (
+    CAMERAS,
+    GRIPPER_WIDTH,
+    MARKER_FIELDS,
+    NATIVE_CAMERA_SIZE,
+    QPOS,
+    QVEL,
+    SIDES,
+    TCP_POSE,
+    camera_key,
+    tactile_key,
+)
+from ..tactile.constants import IMAGE_HEIGHT, IMAGE_WIDTH, MARKER_COLS, MARKER_ROWS
+from ..tasks.robot import PandaSoftVT
+from .images import resize_image
 from .trajectory import open_h5
 
 CODEBASE_VERSION = "v3.0"
@@ -73,6 +87,46 @@ def video_sources() -> dict[str, str]:
 def marker_sources() -> dict[str, str]:
     """LeRobot marker feature -> rendered key (an (N, 2) pixel field, flattened to 2N floats)."""
     return {f"observation.tactile.{s}.{m}": tactile_key(s, m) for s in SIDES for m in MARKER_FIELDS}
+
+
+def frame_features(flat: dict[str, np.ndarray], image_size: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
+    """One live observation (flattened, :func:`~mani_skill_softvt.observations.flatten_batch`) under
+    the export's feature names: ``observation.state``, ``observation.images.<camera>`` and
+    ``observation.images.tactile_<side>``, ``observation.tactile.<side>.<marker field>``; only those
+    the observation has. ``image_size`` resizes every image as the export's ``--image-size`` does
+    (None: each stream's own size). A policy trained on the export reads the live env through
+    these (:mod:`mani_skill_softvt.evaluation.lerobot_env`)."""
+    out = {"observation.state": np.concatenate([np.asarray(flat[k]).reshape(-1) for k, _ in STATE_PARTS])
+           .astype(np.float32)}
+    for feat, key in video_sources().items():
+        if key in flat:
+            image = np.asarray(flat[key])
+            out[feat] = image if image_size is None else resize_image(image, image_size)
+    out.update({feat: np.asarray(flat[key]).reshape(-1).astype(np.float32)
+                for feat, key in marker_sources().items() if key in flat})
+    return out
+
+
+FEATURE_OBS_MODES = ("state_dict", "rgb", "rgb+tactile")  # the obs modes whose frames have these features
+
+
+def frame_feature_shapes(obs_mode: str, camera_size: tuple[int, int] | None = None,
+                         image_size: tuple[int, int] | None = None) -> dict[str, tuple[int, ...]]:
+    """The shape of each feature :func:`frame_features` gives in ``obs_mode`` with the cameras
+    rendered at ``camera_size`` (height, width; None: the native 224x224) and every image resized to
+    ``image_size`` (None: not resized), known without building an env."""
+    if obs_mode not in FEATURE_OBS_MODES:
+        raise ValueError(f"obs mode {obs_mode!r} has no per-stream features; choose one of {FEATURE_OBS_MODES}")
+    dof = len(PandaSoftVT.arm_joint_names) + len(PandaSoftVT.gripper_joint_names)
+    shapes = {"observation.state": (2 * dof + len(TCP_POSE_NAMES) + 1,)}  # qpos, qvel, tcp pose, jaw gap
+    if obs_mode.startswith("rgb"):
+        h, w = image_size or camera_size or NATIVE_CAMERA_SIZE
+        shapes.update({f"observation.images.{c}": (int(h), int(w), 3) for c in CAMERAS})
+    if obs_mode == "rgb+tactile":
+        h, w = image_size or (IMAGE_HEIGHT, IMAGE_WIDTH)
+        shapes.update({f"observation.images.tactile_{s}": (int(h), int(w), 3) for s in SIDES})
+        shapes.update({feat: (2 * MARKER_ROWS * MARKER_COLS,) for feat in marker_sources()})
+    return shapes
 
 
 def required_obs_keys(use_videos: bool) -> list[str]:

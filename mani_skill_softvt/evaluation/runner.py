@@ -175,30 +175,40 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
         def on_step(self, env, action, obs, info):
             on_step(obs, info)
 
-    u = env.unwrapped
     options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
     t0 = time.perf_counter()
     # Cameras render only where the policy reads them; a video (on_step) shows every step's.
     ep = rollout(env, policy, int(episode["seed"]), options=options, replan_steps=replan_steps,
                  observers=[*observers, *([Callback()] if on_step is not None else [])], until="episode",
                  skip_unread_cameras=on_step is None)
-    info = ep.info
+    return episode_record(env, episode, termination=ep.termination, error=ep.error, steps=ep.steps, info=ep.info,
+                          policy_name=getattr(policy, "name", type(policy).__name__), privileged=ep.privileged,
+                          policy_spec=policy_spec, policy_sha256=policy_sha256, wall_s=time.perf_counter() - t0)
+
+
+def episode_record(env, episode: dict, *, termination: str, error: str | None, steps: int, info: dict,
+                   policy_name: str, privileged: bool = False, policy_spec: str | None = None,
+                   policy_sha256: str | None = None, wall_s: float | None = None) -> dict:
+    """The sealed record of an episode that just ended on the DSR-wrapped ``env`` (the scoring
+    and the receipt read from the env as it ended): :func:`run_episode`'s, and that of any other
+    loop that drives the env itself (LeRobot's, :mod:`~mani_skill_softvt.evaluation.lerobot_env`)."""
+    u = env.unwrapped
     material = u.object_material(u.target_instance)
     e = material["youngs_modulus"]  # None for a rigid twin
     receipt = {"youngs_modulus": None if e is None else float(e), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
-               "package_version": __version__, "policy": getattr(policy, "name", type(policy).__name__),
-               "privileged": ep.privileged, "stack": software_stack()}
-    success = ep.termination == "success"
+               "package_version": __version__, "policy": policy_name, "privileged": privileged,
+               "stack": software_stack()}
+    success = termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
            "tactile_model": tactile_model(u.obs_mode), "camera_size": camera_size_of(u),
-           "termination": ep.termination, "error": ep.error,
+           "termination": termination, "error": error,
            "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
-           "dropped": info_bool(info, "dropped"), "steps": ep.steps, "r_max": float(env.r_max),
+           "dropped": info_bool(info, "dropped"), "steps": steps, "r_max": float(env.r_max),
            "collapsed_steps": int(env.collapsed_steps),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
-           "wall_s": round(time.perf_counter() - t0, 3), "receipt": receipt}
+           "wall_s": None if wall_s is None else round(wall_s, 3), "receipt": receipt}
     if policy_sha256 is not None:
         rec["policy_sha256"] = policy_sha256
     return _seal(rec)
