@@ -1,5 +1,12 @@
 #!/usr/bin/env bash
 # One-command setup for a fresh Debian (bookworm) machine, run as root from the repo root.
+#   bash scripts/setup.sh            the default stack in .venv: Python 3.11, CPU torch 2.13.0, NumPy 1.26
+#                                    (every committed result was made on it)
+#   bash scripts/setup.sh lerobot    the LeRobot stack in .venv-lerobot: Python 3.12, NumPy 2.2, torch 2.11
+#                                    from PyPI, LeRobot 0.6.1 and the lerobot_env_softvt plugin (lerobot-train,
+#                                    lerobot-eval --env.type=softvt); beside the default, not instead of it
+# Each stack installs against its constraints file (scripts/constraints-<stack>.txt): the versions it was
+# verified with.
 #   1. Vulkan software rendering: libvulkan1 + mesa-vulkan-drivers 25.x from bookworm-backports
 #      (stable's mesa 22.3 lavapipe lacks descriptorBindingPartiallyBound; SAPIEN then finds
 #      no rendering device). The backports suite uses the mirror URI the machine's own Debian
@@ -15,7 +22,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
-VENV=${SOFTVT_VENV:-$ROOT/.venv}
+STACK=${1:-default}
+case "$STACK" in
+  default) VENV=${SOFTVT_VENV:-$ROOT/.venv} ;;
+  lerobot) VENV=${SOFTVT_LEROBOT_VENV:-$ROOT/.venv-lerobot} ;;
+  *) echo "setup: unknown stack '$STACK'; run 'bash scripts/setup.sh' (default) or 'bash scripts/setup.sh lerobot'" >&2; exit 2 ;;
+esac
+CONSTRAINTS=$ROOT/scripts/constraints-$STACK.txt
 SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 log() { printf '[setup] %s\n' "$*"; }
@@ -47,10 +60,10 @@ fi
 
 # ---------------------------------------------------------------- 2. venv + pip
 stamp="$VENV/.softvt-installed"
-want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
+want=$(cat pyproject.toml scripts/setup.sh "$CONSTRAINTS" plugins/lerobot_env_softvt/pyproject.toml | sha256sum | cut -c1-16)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   log "virtual environment $VENV up to date"
-else
+elif [ "$STACK" = default ]; then
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   # CPU torch first: otherwise mani-skill's torch requirement pulls a CUDA build.
@@ -60,11 +73,30 @@ else
   else
     "$VENV/bin/python" -m pip install -q torch==2.13.0
   fi
-  "$VENV/bin/python" -m pip install -q -e ".[dev]"
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e ".[dev,remote]"
   echo "$want" > "$stamp"
   log "installed the package into $VENV"
+else
+  # LeRobot 0.6.1 needs Python >= 3.12: the machine's python3.12, else pyenv's.
+  # (A pyenv shim on PATH may name python3.12 and still refuse to run it: each candidate is tried.)
+  py=""
+  for cand in "$HOME"/.pyenv/versions/3.12*/bin/python3.12 /root/.pyenv/versions/3.12*/bin/python3.12 "$(command -v python3.12 || true)"; do
+    if [ -n "$cand" ] && [ -x "$cand" ] && "$cand" -c 'import sys, venv; assert sys.version_info[:2] == (3, 12)' 2>/dev/null; then
+      py=$cand; break
+    fi
+  done
+  [ -n "$py" ] || { echo "setup: the LeRobot stack needs Python 3.12 (python3.12 on PATH or pyenv's); install it (e.g. 'pyenv install 3.12') and re-run" >&2; exit 1; }
+  log "Python 3.12 for the LeRobot stack: $py"
+  [ -x "$VENV/bin/python" ] || "$py" -m venv "$VENV"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  # torch 2.11 for Python 3.12 comes from the package index (LeRobot 0.6.1 needs torch < 2.12): a CUDA build
+  # that runs on the CPU, about 5 GB installed.
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" "lerobot[dataset,training,diffusion]==0.6.1" -e ".[dev]"
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e plugins/lerobot_env_softvt
+  echo "$want" > "$stamp"
+  log "installed LeRobot 0.6.1, the package and its plugin into $VENV"
 fi
 
 # ---------------------------------------------------------------- 3. Warp kernel cache
 "$VENV/bin/python" -m mani_skill_softvt.warmup
-log "done. Activate with: source $VENV/bin/activate"
+log "done ($STACK stack). Activate with: source $VENV/bin/activate"

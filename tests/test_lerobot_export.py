@@ -298,3 +298,22 @@ def test_refuses_length_mismatch_and_non_empty_output(tmp_path):
     with pytest.raises(ValueError, match="not empty"):
         export_lerobot([ok], tmp_path / "busy")
     assert (tmp_path / "busy" / "x").read_text() == "keep"
+
+
+def test_live_frames_carry_the_exports_names_shapes_and_values(exported):
+    # A policy trained on the export reads the live env (lerobot-eval's plugin) through
+    # frame_features: the same feature names and shapes as info.json, and on the rendered frame
+    # the same state and marker values as the exported row.
+    from mani_skill_softvt.data.lerobot import frame_feature_shapes, frame_features
+
+    out, info, src = exported
+    exported_shapes = {k: tuple(f["shape"]) for k, f in info["features"].items() if k.startswith("observation.")}
+    assert frame_feature_shapes("rgb+tactile") == exported_shapes
+    s = _source(src)
+    live = frame_features({k: v[0] for k, v in s["obs"].items()})
+    assert {k: v.shape for k, v in live.items()} == exported_shapes
+    table = pq.read_table(out / "data/chunk-000/file-000.parquet")
+    for name in ["observation.state", *marker_sources()]:
+        assert np.array_equal(live[name], _vectors(table, name)[0]), name
+    small = frame_features({k: v[0] for k, v in s["obs"].items()}, image_size=(64, 64))
+    assert {k: v.shape for k, v in small.items()} == frame_feature_shapes("rgb+tactile", image_size=(64, 64))
