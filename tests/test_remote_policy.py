@@ -14,7 +14,10 @@ import numpy as np
 import pytest
 import torch
 
-import mani_skill_softvt  # noqa: F401  (registers the envs)
+pytest.importorskip("openpi_client", reason="ws:// policies need the remote extra (openpi-client, NumPy < 2): "
+                    "the default stack has it, the LeRobot stack does not (docs/install.md)")
+
+import mani_skill_softvt  # noqa: E402,F401  (registers the envs)
 from mani_skill_softvt.evaluation.policies import HoldPolicy, RandomPolicy, _tcp_action, load_policy
 from mani_skill_softvt.evaluation.remote import RemotePolicyError, WebsocketPolicy, to_openpi_observation
 from mani_skill_softvt.physics.transforms import quat_to_rotvec

@@ -94,7 +94,14 @@ def load_policy(spec: str) -> Policy:
         from ..baselines.agent import DiffusionPolicyAgent
         return DiffusionPolicyAgent(spec)
     if spec.startswith(("ws://", "wss://")):  # a policy server (openpi protocol), see evaluation/remote.py
-        from .remote import remote_policy_from_spec
+        try:
+            from .remote import remote_policy_from_spec
+        except ModuleNotFoundError as e:
+            if e.name != "openpi_client":
+                raise
+            raise ValueError(f"--policy {spec} needs openpi's websocket client: pip install 'mani-skill-softvt[remote]' "
+                             "(openpi-client 0.1.2 needs NumPy < 2, so it is on the default stack, scripts/setup.sh, "
+                             "not the LeRobot one)") from None
         return remote_policy_from_spec(spec)
     if ":" not in spec:
         raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}) nor of the form module:Class")
