@@ -12,6 +12,6 @@ Layout (one concept, one place):
 - ``evaluation/``  R_t / R_max / DSR metrics, DSR wrapper, ID/OOD protocols, runner, reports, videos
 """
 
-__version__ = "0.1.0"
+from .version import __version__  # noqa: F401
 
 from . import tasks  # noqa: E402,F401  (registers the four suites and SoftGraspLift-v1)

@@ -369,7 +369,7 @@ _OUT_HELP = (f"demos directory, generate + render output (default {DEMOS_DIR}: $
              "checkout's demos/; needed to generate or render when the package is installed)")
 
 
-def main(argv=None):
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.demos", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -412,6 +412,11 @@ def main(argv=None):
                    help="resize every image stream (cameras and tactile) to HxW, as LeRobot's Diffusion Policy "
                         "needs one shape for all image inputs; 'native' keeps each stream's size (tactile 240x320)")
     e.add_argument("--no-video", action="store_true", help="omit the image features (no mp4), e.g. for a tiny sample")
+    return ap
+
+
+def main(argv=None):
+    ap = _parser()
     args = ap.parse_args(argv)
     if args.out is None:
         args.out = DEMOS_DIR
@@ -420,79 +425,90 @@ def main(argv=None):
                 writable_default(DEMOS_DIR, "--out", "SOFTVT_DEMOS_DIR")
             except ValueError as err:
                 ap.error(str(err))
-    if args.cmd == "generate":
-        tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
-        if args.num < 1 or args.workers < 1:
-            ap.error("--num and --workers must be >= 1")
-        try:
-            report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
-                              planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
-        except ValueError as err:  # a bad --accepted, or a set recorded under other physics or actions
-            ap.error(str(err))
-        for r in report["tasks"]:
-            print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
-                  + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
-            if args.accepted is not None and r["accepted"] < args.accepted:
-                print(f"task {r['task_id']}: {args.num} seeds drew only {r['accepted']} of the {args.accepted} accepted "
-                      f"demos asked for; run again with a larger --num (it resumes)")
-        return report
-    if args.cmd == "render":
-        from tqdm import tqdm
+    command = {"generate": _generate, "render": _render, "export-lerobot": _export_lerobot, "stats": _stats}
+    return command[args.cmd](ap, args)
 
-        from .data.trajectory import CorruptDataError, open_h5
-        from .observations import camera_size_name
 
-        if args.workers < 1:
-            ap.error("--workers must be >= 1")
-        try:
-            camera_size = parse_image_size(args.camera_size, "--camera-size")
-            camera_sensor_configs(camera_size)
-        except ValueError as err:
-            ap.error(str(err))
-        demo_set = DemoSet(args.out, args.suite)
-        tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
-        todo = []
-        for t in tasks:
-            src, dst = demo_set.trajectory(t), demo_set.rendered(t, args.obs_mode, camera_size)
-            if not src.exists():
-                print(f"task {t}: no demos at {src}; run generate first")
-            elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
-                                      TACTILE_MODEL_VERSION if "tactile" in args.obs_mode else None):
-                print(f"task {t}: already rendered (delete {dst.name} to redo it)")
-            else:
-                todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
-        from .parallel import run_tasks
+def _generate(ap: argparse.ArgumentParser, args) -> dict:
+    tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
+    if args.num < 1 or args.workers < 1:
+        ap.error("--num and --workers must be >= 1")
+    try:
+        report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
+                          planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
+    except ValueError as err:  # a bad --accepted, or a set recorded under other physics or actions
+        ap.error(str(err))
+    for r in report["tasks"]:
+        print(f"task {r['task_id']}: {r['accepted']}/{r['generated']} accepted, {r['seconds_per_demo']:.1f} s/demo"
+              + (f", rejected: {r['rejected']}" if r["rejected"] else ""))
+        if args.accepted is not None and r["accepted"] < args.accepted:
+            print(f"task {r['task_id']}: {args.num} seeds drew only {r['accepted']} of the {args.accepted} accepted "
+                  f"demos asked for; run again with a larger --num (it resumes)")
+    return report
 
-        size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
-        try:
-            episodes = 0
-            for item in todo:
-                with open_h5(demo_set.trajectory(item[1])) as f:
-                    episodes += len(f.keys())
-            with tqdm(total=episodes, desc=f"render {args.obs_mode}{size}", unit="episode") as bar:
-                for kind, value in run_tasks(_render_task, todo, args.workers):
-                    if kind == "message":
-                        bar.update(value)
-                    elif kind == "result":
-                        bar.write(f"task {value[0]}: {value[1]} episodes, {value[2]} rendered now, "
-                                  f"{value[1] - value[2]} kept from the previous rendering")
-        except CorruptDataError as err:
-            ap.error(str(err))
-        return None
-    if args.cmd == "export-lerobot":
-        from .data.lerobot import export_lerobot
 
-        demo_set = DemoSet(args.out, args.suite)
-        tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
-        try:
-            sources = demo_set.rendered_sources(tasks, args.obs_mode, parse_image_size(args.camera_size, "--camera-size"))
-            info = export_lerobot(sources, args.lerobot_out,
-                                  use_videos=not args.no_video, image_size=parse_image_size(args.image_size))
-        except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
-            ap.error(str(err))
-        print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "
-              f"{info['total_tasks']} tasks (LeRobot {info['codebase_version']}, {info['fps']} fps)")
-        return info
+def _render(ap: argparse.ArgumentParser, args) -> None:
+    from tqdm import tqdm
+
+    from .data.trajectory import CorruptDataError, open_h5
+    from .observations import camera_size_name
+
+    if args.workers < 1:
+        ap.error("--workers must be >= 1")
+    try:
+        camera_size = parse_image_size(args.camera_size, "--camera-size")
+        camera_sensor_configs(camera_size)
+    except ValueError as err:
+        ap.error(str(err))
+    demo_set = DemoSet(args.out, args.suite)
+    tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
+    todo = []
+    for t in tasks:
+        src, dst = demo_set.trajectory(t), demo_set.rendered(t, args.obs_mode, camera_size)
+        if not src.exists():
+            print(f"task {t}: no demos at {src}; run generate first")
+        elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
+                                  TACTILE_MODEL_VERSION if "tactile" in args.obs_mode else None):
+            print(f"task {t}: already rendered (delete {dst.name} to redo it)")
+        else:
+            todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
+    from .parallel import run_tasks
+
+    size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
+    try:
+        episodes = 0
+        for item in todo:
+            with open_h5(demo_set.trajectory(item[1])) as f:
+                episodes += len(f.keys())
+        with tqdm(total=episodes, desc=f"render {args.obs_mode}{size}", unit="episode") as bar:
+            for kind, value in run_tasks(_render_task, todo, args.workers):
+                if kind == "message":
+                    bar.update(value)
+                elif kind == "result":
+                    bar.write(f"task {value[0]}: {value[1]} episodes, {value[2]} rendered now, "
+                              f"{value[1] - value[2]} kept from the previous rendering")
+    except CorruptDataError as err:
+        ap.error(str(err))
+    return None
+
+
+def _export_lerobot(ap: argparse.ArgumentParser, args) -> dict:
+    from .data.lerobot import export_lerobot
+
+    demo_set = DemoSet(args.out, args.suite)
+    tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
+    try:
+        sources = demo_set.rendered_sources(tasks, args.obs_mode, parse_image_size(args.camera_size, "--camera-size"))
+        info = export_lerobot(sources, args.lerobot_out,
+                              use_videos=not args.no_video, image_size=parse_image_size(args.image_size))
+    except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file
+        ap.error(str(err))
+    print(f"{args.lerobot_out}: {info['total_episodes']} episodes, {info['total_frames']} frames, "
+          f"{info['total_tasks']} tasks (LeRobot {info['codebase_version']}, {info['fps']} fps)")
+    return info
+
+
+def _stats(ap: argparse.ArgumentParser, args) -> dict:
     try:
         summary = stats(args.suite, args.out)
     except FileNotFoundError as err:

@@ -22,9 +22,23 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .tasks.suites import NUM_TASKS, SUITES
+from tqdm import tqdm
 
-DEFAULT_TASKS = (0, 3, 8)
+from .calibration.cards import load_calibration_card
+from .evaluation.metrics import rescore_record
+from .evaluation.report import plot_ood_curves, plot_traces, write_report
+from .evaluation.run import DEFAULT_TASKS, RunConfig
+from .evaluation.runner import (
+    RecordIntegrityError,
+    evaluate,
+    read_records,
+    relative_difference,
+    reproduce,
+    run_records,
+)
+from .observations import parse_image_size
+from .stack import software_stack, stack_differences
+from .tasks.suites import SUITES, task_spec
 
 
 def main(argv=None) -> dict:
@@ -59,8 +73,6 @@ def main(argv=None) -> dict:
                     help="re-run the first N episodes in rgb+tactile mode and write <out>/videos/*.mp4")
     args = ap.parse_args(argv)
 
-    from .evaluation.report import plot_traces, write_report
-
     if args.rescore is not None:
         return _rescore(args.rescore, args.percentile, args.out)
     if args.reproduce is not None:
@@ -69,90 +81,49 @@ def main(argv=None) -> dict:
         if given:
             ap.error(f"--reproduce runs the records' own policy and configuration; drop {', '.join(given)}")
         return _reproduce(ap, args.reproduce, args.episodes_per_task or 1, args.workers)
-    args.episodes_per_task = 1 if args.episodes_per_task is None else args.episodes_per_task
-    _resolve_modes(ap, args)
-    from .observations import parse_image_size
-
-    try:
-        args.camera_size = None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size")
-    except ValueError as e:
-        ap.error(str(e))
-    tasks = list(range(NUM_TASKS)) if args.tasks == ["all"] else [int(t) for t in args.tasks]
-    if any(not 0 <= t < NUM_TASKS for t in tasks):
-        ap.error(f"task ids must be in [0, {NUM_TASKS - 1}]")
-    if args.episodes_per_task < 1 or args.workers < 1:
-        ap.error("--episodes-per-task and --workers must be >= 1")
     if args.video < 0:
         ap.error("--video must be >= 0")
-    if args.video and args.obs_mode in ("state", "none") and args.policy != "expert":
-        ap.error(f"--video re-runs episodes with dict observations (rgb+tactile), which a policy evaluated in "
-                 f"obs mode '{args.obs_mode}' does not read; evaluate with state_dict, rgb or rgb+tactile")
-    if args.policy.startswith(("ws://", "wss://")) and not args.obs_mode.startswith("rgb"):
-        ap.error(f"a policy server gets camera images: use --obs-mode rgb or rgb+tactile, not '{args.obs_mode}'")
-    from tqdm import tqdm
-
-    from .evaluation.protocols import episodes
-    from .evaluation.runner import evaluate, records_stem
-
-    if ":" in args.policy and not args.policy.startswith(("ws://", "wss://")):
-        print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
-    eps = episodes(args.suite, args.protocol, tasks, args.episodes_per_task, args.conditions)
-    stem = records_stem(args.suite, args.protocol, args.policy)
-    bar = tqdm(total=len(eps), desc=f"{args.suite} {args.protocol}", unit="episode")
     try:
-        records = evaluate(eps, args.policy, args.out / f"{stem}.jsonl", args.workers, args.obs_mode, args.control_mode,
-                           progress=bar.update, ray_address=args.ray, camera_size=args.camera_size)
+        run = RunConfig.resolve(args.policy, args.obs_mode, args.control_mode,
+                                None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size"),
+                                suite=args.suite, protocol=args.protocol, tasks=args.tasks,
+                                episodes_per_task=1 if args.episodes_per_task is None else args.episodes_per_task,
+                                conditions=args.conditions)
+    except (ValueError, FileNotFoundError) as e:
+        ap.error(str(e))
+    if args.workers < 1:
+        ap.error("--workers must be >= 1")
+    if args.video and run.obs_mode in ("state", "none") and args.policy != "expert":
+        ap.error(f"--video re-runs episodes with dict observations (rgb+tactile), which a policy evaluated in "
+                 f"obs mode '{run.obs_mode}' does not read; evaluate with state_dict, rgb or rgb+tactile")
+    if run.policy.kind == "class":
+        print(f"note: --policy {args.policy} imports and runs that module's code in the evaluation processes")
+    records_file = args.out / f"{run.stem}.jsonl"
+    bar = tqdm(total=len(run.episodes()), desc=f"{run.suite} {run.protocol}", unit="episode")
+    try:
+        records = evaluate(run, records_file, workers=args.workers, progress=bar.update, ray_address=args.ray)
     except ValueError as e:
         ap.error(str(e))
     bar.close()
     failed = [r for r in records if r["termination"] in ("policy_error", "worker_died")]
     if failed:
         print(f"{len(failed)} episode(s) ended in an error, recorded as failures; the first: {failed[0]['error']}")
-    md, _ = write_report(records, args.out, stem)
-    plot_traces(records, args.out / f"{stem}_traces.png")
-    if args.protocol == "ood":
-        from .evaluation.report import plot_ood_curves
-
-        from .evaluation.runner import run_records
-
-        id_file = args.out / f"{records_stem(args.suite, 'id', args.policy)}.jsonl"
-        from .evaluation.policies import policy_camera_size
-
-        size = args.camera_size or policy_camera_size(args.policy)
-        id_records = list(run_records(id_file, args.policy, args.obs_mode, args.control_mode, size).values())
-        plot_ood_curves(records, id_records, args.out / f"{stem}_ood.png")
+    md, _ = write_report(records, args.out, run.stem)
+    plot_traces(records, args.out / f"{run.stem}_traces.png")
+    if run.protocol == "ood":
+        id_run = run.with_protocol("id")
+        id_records = list(run_records(args.out / f"{id_run.stem}.jsonl", id_run).values())
+        plot_ood_curves(records, id_records, args.out / f"{run.stem}_ood.png")
     print(md.read_text())
     if records and records[0]["receipt"]["privileged"]:
         print("(policy is privileged: it reads the simulator state)")
-    print(f"records: {args.out / f'{stem}.jsonl'}  report: {md}")
+    print(f"records: {records_file}  report: {md}")
     if args.video:
-        _videos(records[:args.video], args.policy, args.control_mode, args.out / "videos", stem, args.camera_size)
+        _videos(records[:args.video], run, args.out / "videos")
     return {"records": records}
 
 
-def _resolve_modes(ap: argparse.ArgumentParser, args) -> None:
-    """Fill in the obs and control modes: a trained baseline's own, else state_dict and pd_ee_pose;
-    a mode that contradicts what the baseline was trained on is an error, not a silent mismatch."""
-    need_obs, need_control = "state_dict", "pd_ee_pose"
-    if args.policy.endswith(".pt"):
-        from .baselines.agent import required_modes
-
-        try:
-            need_obs, need_control = required_modes(Path(args.policy))
-        except (FileNotFoundError, ValueError) as e:
-            ap.error(str(e))
-        for flag, given, need in (("--obs-mode", args.obs_mode, need_obs), ("--control-mode", args.control_mode, need_control)):
-            if given is not None and given != need:
-                ap.error(f"{args.policy} was trained for {flag} {need}; evaluate it with {flag} {need} (or leave the flag out)")
-    args.obs_mode = args.obs_mode or need_obs
-    args.control_mode = args.control_mode or need_control
-
-
 def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: int) -> dict:
-    from tqdm import tqdm
-
-    from .evaluation.runner import RecordIntegrityError, reproduce
-
     if not Path(path).is_file():
         ap.error(f"--reproduce: {path} does not exist")
     bar = tqdm(desc=f"reproduce {Path(path).name}", unit="episode")
@@ -161,8 +132,6 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
     except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
         ap.error(str(e))
     bar.close()
-    from .evaluation.runner import relative_difference
-
     differing = [r for r, _, fields in results if fields]
     for r, new, fields in results:
         where = f"{r['suite']} task {r['task_id']} {r['condition']} seed {r['seed']}"
@@ -170,8 +139,6 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         named = [f if gap is None else f"{f} (by at most {gap:.1e} relative)" for f, gap in gaps]
         print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
     print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
-    from .stack import software_stack, stack_differences
-
     other = stack_differences(results[0][0]["receipt"].get("stack"), software_stack()) if results else []
     if other:
         print(f"the records were made on another stack ({'; '.join(other)}): the same episode keeps its outcome "
@@ -185,12 +152,6 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
 
 
 def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
-    from .calibration.cards import load_calibration_card
-    from .evaluation.metrics import rescore_record
-    from .evaluation.report import write_report
-    from .evaluation.runner import read_records
-    from .tasks.suites import task_spec
-
     if percentile is None:
         raise SystemExit("--rescore needs --percentile")
     if not Path(path).exists():
@@ -207,14 +168,14 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
     return {"records": new}
 
 
-def _videos(records: list[dict], policy: str, control_mode: str, out: Path, stem: str, camera_size=None) -> None:
+def _videos(records: list[dict], run: RunConfig, out: Path) -> None:
     """Videos of ``records`` (re-run in rgb+tactile mode); existing files are kept, so a re-run resumes."""
     from .evaluation.videos import record_episode_video, video_name
 
     for r in records:
-        path = out / video_name(stem, r)
+        path = out / video_name(run.stem, r)
         if not path.exists():
-            record_episode_video(r, policy, path, control_mode=control_mode, camera_size=camera_size)
+            record_episode_video(r, run, path)
         print(f"video: {path}")
 
 

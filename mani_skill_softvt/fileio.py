@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import tempfile
@@ -110,3 +111,12 @@ def read_jsonl(path: Path) -> list[dict]:
     """Records of a JSONL log (see :func:`read_jsonl_lines`: a torn last line is dropped, a
     corrupt line elsewhere raises with its file and line)."""
     return [rec for _, rec in read_jsonl_lines(path)]
+
+
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file's bytes (a policy file's identity in its records)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()

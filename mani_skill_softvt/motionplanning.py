@@ -160,6 +160,11 @@ def main(argv=None) -> dict:
     return {"path": str(out), "tried": tried, "succeeded": succeeded}
 
 
-if __name__ == "__main__":
+def cli() -> None:
+    """The console command (``softvt-motionplanning``): Warp needs spawned workers, as under ``python -m``."""
     mp.set_start_method("spawn", force=True)
     main()
+
+
+if __name__ == "__main__":
+    cli()

@@ -37,7 +37,6 @@ MARKER_FIELDS = ("marker_initial", "marker_current")
 TACTILE_FIELDS = ("rgb", "depth", *MARKER_FIELDS)
 QPOS, QVEL = "agent/qpos", "agent/qvel"
 TCP_POSE, GRIPPER_WIDTH = "extra/tcp_pose", "extra/gripper_width"
-PROPRIOCEPTION = (QPOS, QVEL, TCP_POSE, GRIPPER_WIDTH)
 NATIVE_CAMERA_SIZE = (224, 224)  # (height, width) of both cameras by default (the paper's views)
 
 

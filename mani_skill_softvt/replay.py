@@ -129,7 +129,12 @@ def main(argv: list[str] | None = None) -> None:
     replay_trajectory.main(args)
 
 
-if __name__ == "__main__":
+def cli() -> None:
+    """The console command (``softvt-replay``)."""
     # ManiSkill's replay starts worker processes with -n > 1; Warp needs spawn (as ManiSkill's own tool does).
     mp.set_start_method("spawn", force=True)
     main(sys.argv[1:])
+
+
+if __name__ == "__main__":
+    cli()

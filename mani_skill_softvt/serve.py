@@ -24,8 +24,8 @@ import traceback
 
 import numpy as np
 
-from . import __version__
-from .evaluation.policies import BUILTIN, load_policy, policy_camera_size
+from .version import __version__
+from .evaluation.policies import BUILTIN, resolve_policy
 from .evaluation.remote import (
     ACTION_DIM,
     CAMERAS,
@@ -77,14 +77,16 @@ def _servable() -> list[str]:
 
 
 def make_policy_factory(spec: str):
-    """A zero-argument constructor of the policy ``spec``; ValueError for privileged policies."""
+    """A zero-argument constructor of the policy ``spec``, its name and the camera size it asks
+    for; ValueError for privileged policies."""
     if spec in BUILTIN and is_privileged(BUILTIN[spec]):
         raise ValueError(f"policy '{spec}' is privileged (it plans on the env's simulator state) and cannot be "
                          f"served; serve an observation-only policy: {', '.join(_servable())} or module:Class")
-    probe = load_policy(spec)  # fails now, not on the first connection
+    source = resolve_policy(spec)  # resolved once; each connection builds its policy from it
+    probe = source.load()  # fails now, not on the first connection
     if is_privileged(probe):
         raise ValueError(f"policy '{spec}' is privileged (it needs the env) and cannot be served")
-    return lambda: load_policy(spec), getattr(probe, "name", type(probe).__name__)
+    return source.load, getattr(probe, "name", type(probe).__name__), source.camera_size
 
 
 
@@ -144,11 +146,10 @@ def main(argv=None) -> None:
     if not 0 <= args.port <= 65535:
         ap.error(f"--port must be in [0, 65535], got {args.port}")
     try:
-        factory, name = make_policy_factory(args.policy)
-    except ValueError as e:
+        factory, name, size = make_policy_factory(args.policy)  # size: what the evaluator would render in process
+    except (ValueError, FileNotFoundError) as e:
         ap.error(str(e))
     try:
-        size = policy_camera_size(args.policy)  # what the evaluator would render for it in process
         server = build_server(factory, name, args.host, args.port, None if size is None else list(size))
     except OSError as e:  # port taken, address not local
         ap.error(f"cannot listen on {args.host}:{args.port}: {e}; choose another --port (0: any free one)")

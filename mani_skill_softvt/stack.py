@@ -11,7 +11,7 @@ import platform
 from functools import lru_cache
 from importlib import metadata
 
-from . import __version__
+from .version import __version__
 
 # The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
 # policy's network (torch), the array maths (numpy) and ManiSkill's env glue.

@@ -11,8 +11,9 @@ def soft_cube_expert_run(tmp_path_factory):
     Returns (episodes, records, path of the JSONL the records were written to).
     """
     from mani_skill_softvt.evaluation.protocols import episodes
+    from mani_skill_softvt.evaluation.run import RunConfig
     from mani_skill_softvt.evaluation.runner import evaluate
 
     eps = episodes("object_soft", "id", tasks=[3], per_task=1)
     path = tmp_path_factory.mktemp("expert_run") / "full.jsonl"
-    return eps, evaluate(eps, "expert", path), path
+    return eps, evaluate(RunConfig.resolve("expert"), path, eps), path

@@ -617,9 +617,9 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     assert rec["receipt"]["policy"] == "diffusion_policy[vt-c,cpu,rgb+depth]" and not rec["receipt"]["privileged"]
     assert (rec["obs_mode"], rec["control_mode"]) == ("rgb+tactile", "pd_ee_pose")
     assert rec["termination"] in ("timeout", "dropped", "success") and rec["error"] is None
-    from mani_skill_softvt.evaluation.runner import policy_file_sha256
+    from mani_skill_softvt.fileio import file_sha256
 
-    assert rec["policy_sha256"] == policy_file_sha256(str(path))  # the record pins the weights it scored
+    assert rec["policy_sha256"] == file_sha256(path)  # the record pins the weights it scored
 
 
 def test_results_table_puts_each_variant_beside_the_paper(tmp_path):

@@ -16,6 +16,7 @@ from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.metrics import summarize, tolerance_violated
 from mani_skill_softvt.evaluation.policies import HoldPolicy
 from mani_skill_softvt.evaluation.protocols import episodes
+from mani_skill_softvt.evaluation.run import RunConfig
 from mani_skill_softvt.evaluation.runner import RecordIntegrityError, evaluate, record_hash, run_episode
 from mani_skill_softvt.fileio import CorruptLogError
 
@@ -87,7 +88,7 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
     monkeypatch.setenv(CRUSH_TARGET_ENV, ",".join(repr(float(v)) for v in _target_top(cube_env, crush_seed)))
     eps = episodes("object_soft", "id", tasks=[TASK], per_task=len(BEHAVIOURS))
     out = tmp_path / "misbehaving.jsonl"
-    records = evaluate(eps, SPEC, out)
+    records = evaluate(RunConfig.resolve(SPEC), out, eps)
     assert [r["seed"] for r in records] == [e["seed"] for e in eps]
     got = {b: r for b, r in zip(BEHAVIOURS, records)}
     expected = {"raise_in_act": ("policy_error", "ZeroDivisionError in policy.act(): deliberate failure in act"),
@@ -111,11 +112,11 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
 
     # Resume: nothing re-runs; every line is verified.
     ticks = []
-    assert evaluate(eps, SPEC, out, progress=ticks.append) == records and ticks == [len(eps)]
+    assert evaluate(RunConfig.resolve(SPEC), out, eps, progress=ticks.append) == records and ticks == [len(eps)]
     # Another control mode is another run: its records are not reused, and the first run's stay.
-    other = evaluate(eps[5:6], SPEC, out, control_mode="pd_ee_pose_binary")
+    other = evaluate(RunConfig.resolve(SPEC, control_mode="pd_ee_pose_binary"), out, eps[5:6])
     assert other[0]["control_mode"] == "pd_ee_pose_binary" and other[0]["termination"] == "policy_error"
-    assert evaluate(eps, SPEC, out) == records
+    assert evaluate(RunConfig.resolve(SPEC), out, eps) == records
 
     lines = out.read_text().splitlines()
     tampered = json.loads(lines[1])
@@ -124,14 +125,14 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
                               ('{"suite": "object_so', CorruptLogError, f"{out}:2:")):
         out.write_text("\n".join([lines[0], bad, *lines[2:]]) + "\n")
         with pytest.raises(error, match=where):
-            evaluate(eps, SPEC, out)
+            evaluate(RunConfig.resolve(SPEC), out, eps)
         from mani_skill_softvt.evaluate import main
 
         with pytest.raises(error, match=where):
             main(["--rescore", str(out), "--percentile", "80", "--out", str(tmp_path)])
     # A torn last line (killed writer) is still recovered: the records before it stand.
     out.write_text("\n".join(lines) + '\n{"suite": "obj')
-    assert evaluate(eps, SPEC, out) == records
+    assert evaluate(RunConfig.resolve(SPEC), out, eps) == records
 
 
 def _descendants(pid: int) -> set[int]:
@@ -188,6 +189,7 @@ def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
 def test_records_of_another_tactile_model_are_another_run(tmp_path):
     # Frames of another tactile model are other observations: resuming never pools them. Records
     # from before the version was kept count as model 1.
+    from mani_skill_softvt.evaluation.policies import PolicySource
     from mani_skill_softvt.evaluation.runner import run_records
     from mani_skill_softvt.fileio import append_jsonl
     from mani_skill_softvt.tactile.constants import MODEL_VERSION
@@ -198,7 +200,8 @@ def test_records_of_another_tactile_model_are_another_run(tmp_path):
     for task, extra in ((0, {}), (1, {"tactile_model": MODEL_VERSION})):
         rec = {**base, "task_id": task, "seed": task, **extra}
         append_jsonl(out, {**rec, "record_sha256": record_hash(rec)})
-    got = run_records(out, "p.pt", "rgb+tactile", "pd_ee_pose")
+    run = RunConfig(PolicySource("p.pt", "diffusion_policy"), "rgb+tactile", "pd_ee_pose", None)
+    got = run_records(out, run)
     assert MODEL_VERSION > 1 and [r["task_id"] for r in got.values()] == [1]
 
 
@@ -223,16 +226,19 @@ def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_pat
     """A policy trained on small images (``camera_size``) sees its cameras rendered at that size,
     and its record says so; other policies' records keep the native 224x224."""
     eps = episodes("object_soft", "id", tasks=[TASK], per_task=1)
-    (rec,) = evaluate(eps, "misbehaving_policies:SmallCameras", tmp_path / "small.jsonl", obs_mode="rgb")
+    small = RunConfig.resolve("misbehaving_policies:SmallCameras", obs_mode="rgb")
+    (rec,) = evaluate(small, tmp_path / "small.jsonl", eps)
     assert rec["termination"] == "policy_error" and "NaN" in rec["error"], rec["error"]  # not "cameras seen at"
     assert rec["camera_size"] == [24, 32] and rec["steps"] == 0
     # Another camera size is another run; asking the policy for one it was not trained on is refused.
     from mani_skill_softvt.evaluation.runner import record_field, run_records
 
-    assert run_records(tmp_path / "small.jsonl", "misbehaving_policies:SmallCameras", "rgb", "pd_ee_pose", (24, 32))
-    assert not run_records(tmp_path / "small.jsonl", "misbehaving_policies:SmallCameras", "rgb", "pd_ee_pose")
+    from dataclasses import replace
+
+    assert small.camera_size == (24, 32) and run_records(tmp_path / "small.jsonl", small)
+    assert not run_records(tmp_path / "small.jsonl", replace(small, camera_size=None))
     with pytest.raises(ValueError, match="trained on 24x32 cameras; evaluate it at that size"):
-        evaluate(eps, "misbehaving_policies:SmallCameras", tmp_path / "other.jsonl", obs_mode="rgb", camera_size=(84, 84))
+        RunConfig.resolve("misbehaving_policies:SmallCameras", obs_mode="rgb", camera_size=(84, 84))
     # Records from before the size was kept had the native cameras; state modes have none.
     assert record_field({"obs_mode": "rgb"}, "camera_size") == [224, 224]
     assert record_field({"obs_mode": "state_dict"}, "camera_size") is None

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from mani_skill_softvt.evaluation.run import RunConfig
 from mani_skill_softvt.evaluation.runner import evaluate, record_hash
 from mani_skill_softvt.fileio import read_jsonl
 
@@ -20,13 +21,13 @@ def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube
     # Interrupted run: killed while the episode's record was being written (a torn last line).
     part = tmp_path / "part.jsonl"
     part.write_text(full_path.read_text()[:40])
-    resumed = evaluate(eps, "expert", part)
+    resumed = evaluate(RunConfig.resolve("expert"), part, eps)
     assert _strip(resumed) == _strip(full)  # the episode re-ran to the same record
     assert len(read_jsonl(part)) == 1  # the torn line is gone, nothing duplicated
     # A finished file resumes without running anything: progress reports the episode as done
     # before any work and never again.
     ticks = []
-    again = evaluate(eps, "expert", part, progress=ticks.append)
+    again = evaluate(RunConfig.resolve("expert"), part, eps, progress=ticks.append)
     assert again == resumed and ticks == [1] and len(read_jsonl(part)) == 1
     for r in full:
         assert r["success"] and not r["dropped"], r
@@ -65,18 +66,15 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
 
 
 def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
-    from mani_skill_softvt.evaluation.runner import (
-        policy_file_sha256,
-        policy_tag,
-        records_stem,
-        reproduce,
-    )
+    from mani_skill_softvt.evaluation.run import policy_tag, records_stem
+    from mani_skill_softvt.evaluation.runner import reproduce
+    from mani_skill_softvt.fileio import file_sha256
 
     policy = tmp_path / "vo-c.pt"
     policy.write_bytes(b"the weights the records were made with")
     rec = {"suite": "object_soft", "task_id": 0, "condition": "id", "seed": 1, "policy": str(policy),
            "obs_mode": "rgb", "control_mode": "pd_ee_pose", "camera_size": [84, 84],
-           "policy_sha256": policy_file_sha256(str(policy))}
+           "policy_sha256": file_sha256(policy)}
     rec["record_sha256"] = record_hash(rec)
     path = tmp_path / "records.jsonl"
     path.write_text(json.dumps(rec) + "\n")
@@ -86,7 +84,6 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
     policy.write_bytes(b"retrained")
     with pytest.raises(ValueError, match="not the policy file these records were made with"):
         reproduce(path)
-    assert policy_file_sha256("expert") is None
     assert policy_tag("runs/vo-c-cpu/policy.pt") == "vo-c-cpu" and policy_tag("ws://gpu:8000") == "ws_gpu_8000"
     assert records_stem("object_soft", "id", "x/snapshots/vo-c-long_step012000.pt") == "object_soft_id_vo-c-long_step012000"
 

@@ -101,3 +101,73 @@ def test_data_keeps_file_formats_and_does_not_plan():
     for path in (PACKAGE / "data").glob("*.py"):
         assert imports_any(path, ("mani_skill_softvt.expert", "mani_skill_softvt.evaluation",
                                   "mani_skill_softvt.calibration")) == [], path
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Every package module -> the package modules it imports (lazy imports included).
+    ``from . import x`` imports the module ``x``, not the package's ``__init__``."""
+    names = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        names[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph = {}
+    for name, path in names.items():
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        out = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                out.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = package[:len(package) - node.level + 1] if node.level else []
+                mod = ".".join(base + ([node.module] if node.module else []))
+                subs = {f"{mod}.{a.name}" for a in node.names} & set(names)
+                out |= subs if subs and node.module is None else {mod} | subs
+        graph[name] = {m for m in out if m in names and m != name and m != "mani_skill_softvt"}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one node (Tarjan)."""
+    index, low, stack, on, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_module_imports_itself_back():
+    """No two modules import each other, through any chain (lazy imports count: they hide a
+    dependency, they do not remove it)."""
+    assert _cycles(_module_graph()) == []
+
+
+def test_the_evaluation_never_imports_the_baselines():
+    """Policies load through the evaluation's door (evaluation/policies.py); the baselines register
+    their policy files there as an entry point, so the dependency points one way."""
+    graph = _module_graph()
+    for name, deps in graph.items():
+        if name.startswith("mani_skill_softvt.evaluation"):
+            assert not [d for d in deps if d.startswith("mani_skill_softvt.baselines")], name
+    assert "mani_skill_softvt.baselines.train" not in graph["mani_skill_softvt.baselines.agent"]

@@ -74,6 +74,7 @@ def test_missing_ray_says_how_to_install_it(monkeypatch):
 
 @pytest.mark.slow  # a full expert episode on a Ray worker (~40 s)
 def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_path, soft_cube_expert_run):
+    from mani_skill_softvt.evaluation.run import RunConfig
     from mani_skill_softvt.evaluation.runner import evaluate
     from mani_skill_softvt.fileio import read_jsonl
 
@@ -84,9 +85,9 @@ def test_expert_episode_records_on_ray_are_identical_to_local(local_ray, tmp_pat
     eps, local, _ = soft_cube_expert_run
     eps, local = eps[:1], local[:1]
     ticks = []
-    on_ray = evaluate(eps, "expert", tmp_path / "ray.jsonl", progress=ticks.append, ray_address=local_ray)
+    on_ray = evaluate(RunConfig.resolve("expert"), tmp_path / "ray.jsonl", eps, progress=ticks.append, ray_address=local_ray)
     assert local and strip(on_ray) == strip(local)  # same trace, receipt and content hash
     assert local[0]["success"] and sum(ticks) == len(eps)
     # Resume is unchanged: a second Ray run finds every episode done and submits nothing.
-    again = evaluate(eps, "expert", tmp_path / "ray.jsonl", progress=ticks.append, ray_address=local_ray)
+    again = evaluate(RunConfig.resolve("expert"), tmp_path / "ray.jsonl", eps, progress=ticks.append, ray_address=local_ray)
     assert again == on_ray and len(read_jsonl(tmp_path / "ray.jsonl")) == len(eps)

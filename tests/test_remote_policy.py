@@ -66,7 +66,7 @@ def _serving(server):
 
 
 def _serve_project_policy(spec: str):
-    factory, name = make_policy_factory(spec)
+    factory, name, _ = make_policy_factory(spec)
     return _serving(build_server(factory, name, "127.0.0.1", 0))
 
 
@@ -289,7 +289,7 @@ def test_env_episode_scored_the_same_in_process_and_served():
 
 
 def test_a_server_whose_policy_takes_smaller_cameras_says_so_and_a_mismatch_is_an_error():
-    factory, name = make_policy_factory("random")
+    factory, name, _ = make_policy_factory("random")
     with _serving(build_server(factory, name, "127.0.0.1", 0, camera_size=[84, 84])) as url:
         remote = WebsocketPolicy(url, reply_timeout=10)
         remote.reset("pick", 1)

@@ -99,6 +99,7 @@ def test_short_episode_video_is_the_stored_episode(tmp_path):
 
     import mani_skill_softvt  # noqa: F401
     from mani_skill_softvt.evaluation.policies import load_policy
+    from mani_skill_softvt.evaluation.run import RunConfig
     from mani_skill_softvt.evaluation.runner import run_episode
     from mani_skill_softvt.evaluation.videos import record_episode_video
     from mani_skill_softvt.evaluation.wrapper import DSRWrapper
@@ -114,11 +115,11 @@ def test_short_episode_video_is_the_stored_episode(tmp_path):
     path = tmp_path / "videos" / video_name("t", ep)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # a re-run that differs from the record fails here
-        rerun = record_episode_video(stored, "hold", path, max_steps=steps)
+        rerun = record_episode_video(stored, RunConfig.resolve("hold"), path, max_steps=steps)
     assert rerun["steps"] == steps and rerun["deformation_trace"] == stored["deformation_trace"]
     frames = imageio.mimread(path, memtest=False)
     assert len(frames) == steps + 1  # the reset and every step
     assert frames[0].shape == compose_frame(*_images(), [0.0]).shape
     assert not list(tmp_path.glob("videos/.*"))  # the atomic write left no temporary file
     with pytest.raises(ValueError, match="rgb\\+tactile"):
-        record_episode_video(stored, "hold", tmp_path / "x.mp4", obs_mode="rgb")
+        record_episode_video(stored, RunConfig.resolve("hold"), tmp_path / "x.mp4", obs_mode="rgb")

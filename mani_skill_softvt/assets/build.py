@@ -16,11 +16,11 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from ..fileio import atomic_write
 from ..paths import ASSETS_DIR, writable_default
 from .cards import ASSET_IDS, PROP_NAMES, read_obj, twin_id
 from .materials import MATERIALS, PROP_FRICTION, TWIN_MAX_CONVEX_PARTS
@@ -47,10 +47,7 @@ DESCRIPTIONS = {
 
 
 def _atomic_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: tmp.write_bytes(data))
 
 
 def obj_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:

@@ -194,9 +194,6 @@ class PropCard:
     collision_files: tuple  # convex parts (OBJ), prop frame
     regions: dict  # name -> (lo xyz, hi xyz) axis-aligned boxes in the prop frame (e.g. "interior")
 
-    def visual_mesh(self):
-        return read_obj(self.visual_file)
-
     def convex_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
         return [read_obj(p) for p in self.collision_files]
 

@@ -38,7 +38,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..physics.constants import DEFAULT_OBJECT_FRICTION, DEFAULT_TET_DAMPING
+DEFAULT_TET_DAMPING = 1.0  # Pa*s
+DEFAULT_OBJECT_FRICTION = 1.0
 
 # asset id -> (density, youngs_modulus, poisson_ratio, damping, friction)
 MATERIALS = {

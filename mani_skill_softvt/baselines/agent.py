@@ -12,31 +12,35 @@ runs on one thread here, so an episode is the same bit for bit on a re-run.
 
 from __future__ import annotations
 
+import hashlib
 from collections import deque
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from ..evaluation.policies import PolicyKind, PolicySource
 from ..observations import NATIVE_CAMERA_SIZE, flatten_batch
 from ..policy import Policy
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .config import DPConfig
 from .features import frame_features
 from .model import DiffusionPolicyModel, noise_scheduler
-from .train import empty_stats, load_checkpoint
+from .model import empty_stats, load_checkpoint
 
 GRIPPER = 6  # the action's gripper column
 
 
-def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
-    """The config and the checkpoint of a ``policy.pt`` (its ``model`` is a state dict); a clear
-    error for anything else."""
+def read_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, dict]:
+    """The config and the checkpoint of a ``policy.pt`` (its ``model`` is a state dict), from
+    ``data`` if the file was already read; a clear error for anything else."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
-                                "`python -m mani_skill_softvt.baselines.train --variant ...` (it writes policy.pt)")
-    ckpt = load_checkpoint(path)
+    if data is None:
+        if not path.is_file():
+            raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
+                                    "`python -m mani_skill_softvt.baselines.train --variant ...` (it writes policy.pt)")
+        data = path.read_bytes()
+    ckpt = load_checkpoint(data, path)
     if not isinstance(ckpt, dict) or "config" not in ckpt or "model" not in ckpt or "optimizer" in ckpt:
         raise ValueError(f"{path} is not a baseline policy file (policy.pt written at the end of training); "
                          "a checkpoint.pt is a training state: finish the run to get policy.pt")
@@ -49,6 +53,17 @@ def read_policy_file(path: Path) -> tuple[DPConfig, dict]:
     return cfg, ckpt
 
 
+def _read_pinned(path: Path, sha256: str | None) -> bytes:
+    """The bytes of a policy file, checked against the SHA-256 its run was resolved with."""
+    if not Path(path).is_file():
+        read_policy_file(path)  # the message that says how to get one
+    data = Path(path).read_bytes()
+    if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+        raise ValueError(f"{path} changed since the evaluation started (its SHA-256 is not the one its records carry); "
+                         "evaluate again once it is no longer being written")
+    return data
+
+
 def camera_render_size(ckpt: dict) -> tuple[int, int] | None:
     """(height, width) a policy's training cameras were rendered at, None for the native 224x224
     (policy files from before it was kept were trained on native renderings)."""
@@ -56,9 +71,9 @@ def camera_render_size(ckpt: dict) -> tuple[int, int] | None:
     return tuple(int(v) for v in size) if size and tuple(size) != NATIVE_CAMERA_SIZE else None
 
 
-def load_policy_file(path: Path) -> tuple[DPConfig, DiffusionPolicyModel, dict]:
+def load_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, DiffusionPolicyModel, dict]:
     """The config, the (EMA) model, ready for inference on the CPU, and the checkpoint of a ``policy.pt``."""
-    cfg, ckpt = read_policy_file(path)
+    cfg, ckpt = read_policy_file(path, data)
     model = DiffusionPolicyModel(cfg, empty_stats(cfg))
     model.load_state_dict(ckpt["model"])
     model.eval()
@@ -72,11 +87,40 @@ def policy_name(cfg: DPConfig) -> str:
     return f"diffusion_policy[{','.join(parts)}]"
 
 
-def required_modes(path: Path) -> tuple[str, str]:
-    """(obs mode, control mode) a ``policy.pt`` was trained for: rgb+tactile for VT variants, and
-    the binary gripper control mode for the -b variants."""
-    cfg, _ = read_policy_file(path)  # the config only: no network is built
+def required_modes(cfg: DPConfig) -> tuple[str, str]:
+    """(obs mode, control mode) a policy of ``cfg`` was trained for: rgb+tactile for VT variants,
+    and the binary gripper control mode for the -b variants."""
     return ("rgb+tactile" if cfg.tactile else "rgb"), ("pd_ee_pose_binary" if cfg.binary_gripper else "pd_ee_pose")
+
+
+class PolicyFiles(PolicyKind):
+    """The trained baselines' policy files (a run's ``policy.pt``, a snapshot, an exported ``.pt``)
+    as a policy kind of the evaluation (registered in ``pyproject.toml``): one read of the file
+    gives its hash, the modes it was trained for and its camera size."""
+
+    name = "diffusion_policy"
+
+    def matches(self, spec: str) -> bool:
+        return spec.endswith(".pt")
+
+    def resolve(self, spec: str) -> PolicySource:
+        return resolve_policy_file(spec)[0]
+
+    def load(self, source: PolicySource) -> Policy:
+        return DiffusionPolicyAgent(source.spec, sha256=source.sha256)
+
+
+POLICY_FILES = PolicyFiles()
+
+
+def resolve_policy_file(spec: str | Path) -> tuple[PolicySource, DPConfig, dict]:
+    """The :class:`PolicySource` of a policy file, with its config and checkpoint, from one read."""
+    data = _read_pinned(Path(spec), None)
+    cfg, ckpt = read_policy_file(Path(spec), data)
+    obs_mode, control_mode = required_modes(cfg)
+    source = PolicySource(str(spec), PolicyFiles.name, sha256=hashlib.sha256(data).hexdigest(), obs_modes=(obs_mode,),
+                          control_modes=(control_mode,), camera_size=camera_render_size(ckpt))
+    return source, cfg, ckpt
 
 
 def executed_actions(chunk: np.ndarray, cfg: DPConfig) -> np.ndarray:
@@ -93,9 +137,9 @@ def executed_actions(chunk: np.ndarray, cfg: DPConfig) -> np.ndarray:
 class DiffusionPolicyAgent(Policy):
     """Closed-loop Diffusion Policy (see the module docstring)."""
 
-    def __init__(self, path: str | Path, threads: int = 1):
+    def __init__(self, path: str | Path, threads: int = 1, sha256: str | None = None):
         self.path = Path(path)
-        self.cfg, self.model, ckpt = load_policy_file(self.path)
+        self.cfg, self.model, ckpt = load_policy_file(self.path, _read_pinned(self.path, sha256))
         self.name = policy_name(self.cfg)
         self.camera_size = camera_render_size(ckpt)  # the evaluator renders its cameras as in training
         self.obs_mode = "rgb+tactile" if self.cfg.tactile else "rgb"  # what required_modes() says

@@ -67,26 +67,25 @@ class ClosureLog(Observer):
         self.held.append(info_bool(info, "is_grasped"))
 
 
-def _run(policy_spec: str, episodes: list[dict], obs_mode: str, control_mode: str, camera_size, policy_sha256,
-         queue) -> list[dict]:
-    """A worker: each episode of ``policy_spec`` as the evaluator runs it, with its closure log."""
-    from ..evaluation.policies import load_policy
+def _run(run, episodes: list[dict], queue) -> list[dict]:
+    """A worker: each episode of ``run`` (a :class:`~mani_skill_softvt.evaluation.run.RunConfig`) as
+    the evaluator runs it, with its closure log."""
     from ..evaluation.runner import run_episode
     from ..evaluation.wrapper import make_env
     from ..expert.pick_place import draw_closure
     from .agent import GRIPPER
 
-    policy = load_policy(policy_spec)
-    env = make_env(episodes[0]["suite"], episodes[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
-                   camera_size=camera_size)
+    policy = run.policy.load()
+    env = make_env(episodes[0]["suite"], episodes[0]["task_id"], obs_mode=run.obs_mode, control_mode=run.control_mode,
+                   camera_size=run.camera_size)
     out = []
     try:
         for ep in episodes:
             log = ClosureLog(GRIPPER)
-            record = run_episode(env, policy, ep, policy_spec=policy_spec, policy_sha256=policy_sha256,
+            record = run_episode(env, policy, ep, policy_spec=run.policy.spec, policy_sha256=run.policy.sha256,
                                  observers=[log])
             card = env.calibration_card
-            out.append({"record": record, "closure": log.closure, "held": log.held,
+            out.append({"record": record, "chunk": policy.cfg.action_steps, "closure": log.closure, "held": log.held,
                         "expert_closure": draw_closure(card, ep["seed"]), "g_min": card.g_min, "g_max": card.g_max})
             queue.put(ep["seed"])
     finally:
@@ -149,31 +148,28 @@ def main(argv=None) -> dict:
         ap.error(f"--task must be in [0, {NUM_TASKS - 1}], got {args.task}")
     if not 1 <= args.episodes <= ID_EPISODES_PER_TASK:
         ap.error(f"--episodes must be in [1, {ID_EPISODES_PER_TASK}] (the ID protocol's seeds), got {args.episodes}")
-    from ..evaluation.protocols import episode_key, episodes
-    from ..evaluation.runner import policy_file_sha256, policy_tag, record_differences, records_stem, run_records
-    from .agent import camera_render_size, read_policy_file, required_modes
-
-    configs = {}
+    from ..evaluation.protocols import episode_key
+    from ..evaluation.run import RunConfig, policy_tag
+    from ..evaluation.runner import record_differences, run_records
+    runs = {}
     for spec in args.policies:
         if not spec.endswith(".pt") or not Path(spec).is_file():
             ap.error(f"{spec}: not a policy file; give the policy.pt of a trained baseline or an exported .pt")
         try:
-            obs_mode, control_mode = required_modes(Path(spec))
-            cfg, ckpt = read_policy_file(Path(spec))  # the config and camera size from one read
+            run = RunConfig.resolve(spec, suite="object_soft", tasks=[args.task], episodes_per_task=args.episodes)
         except (FileNotFoundError, ValueError) as e:
             ap.error(f"{spec}: {e}")
-        if cfg.binary_gripper:
+        if run.control_mode == "pd_ee_pose_binary":
             ap.error(f"{spec} commands a binary gripper (open or closed): it has no closure to follow")
-        if policy_tag(spec) in configs:
+        if policy_tag(spec) in runs:
             ap.error(f"two policies are named {policy_tag(spec)}; give each once, from differently named files")
-        configs[policy_tag(spec)] = (spec, obs_mode, control_mode, camera_render_size(ckpt), policy_file_sha256(spec),
-                                     cfg.action_steps)
+        runs[policy_tag(spec)] = run
     from tqdm import tqdm
 
     from ..parallel import run_tasks
 
-    eps = episodes("object_soft", "id", [args.task], args.episodes)
-    items = [(spec, eps, obs, control, size, sha) for spec, obs, control, size, sha, _ in configs.values()]
+    eps = next(iter(runs.values())).episodes()
+    items = [(run, eps) for run in runs.values()]
     results = {}
     with tqdm(total=len(eps) * len(items), desc="closure", unit="episode") as bar:
         for kind, value in run_tasks(_run, items, workers=len(items)):
@@ -182,12 +178,12 @@ def main(argv=None) -> dict:
             else:
                 tag = policy_tag(value[0]["record"]["policy"])
                 results[tag] = value
-    results = {tag: results[tag] for tag in configs}  # in the order given
+    results = {tag: results[tag] for tag in runs}  # in the order given
     report = {"task": args.task, "policies": {}}
     for tag, episodes_run in results.items():
-        spec, obs, control, size, sha, chunk = configs[tag]
-        stored = run_records(args.records / f"{records_stem('object_soft', 'id', spec)}.jsonl", spec, obs, control,
-                             size, sha)
+        run, chunk = runs[tag], episodes_run[0]["chunk"]
+        sha = run.policy.sha256
+        stored = run_records(args.records / f"{run.stem}.jsonl", run)
         differing = {e["record"]["seed"]: record_differences(stored[episode_key(e["record"])], e["record"])
                      for e in episodes_run if episode_key(e["record"]) in stored}
         rows = summary_rows(episodes_run, chunk)

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import torch
 
-from ..evaluation.runner import policy_file_sha256
+from ..fileio import file_sha256
 from ..fileio import atomic_write
 from .agent import read_policy_file
-from .train import load_checkpoint
+from .model import load_checkpoint
 
 MAX_MIB = 20.0
 KEEP_FLOAT32 = ("normalize.",)  # state-dict prefixes kept in float32 (the normalisers' ranges)
@@ -48,7 +48,7 @@ def export(source: Path, dest: Path, max_mib: float = MAX_MIB, if_changed: bool 
     source, dest = Path(source), Path(dest)
     if not dest.name.endswith(".pt") or dest.name == "policy.pt":
         raise ValueError(f"{dest}: name the export <variant>-<recipe>.pt (its records are named after the file)")
-    sha = policy_file_sha256(str(source)) if source.is_file() else None  # a missing file: read_policy_file says so
+    sha = file_sha256(source) if source.is_file() else None  # a missing file: read_policy_file says so
     if if_changed and dest.exists() and load_checkpoint(dest).get("exported_from") == sha:
         return False
     buffer = io.BytesIO()

@@ -15,6 +15,8 @@ the sampler's arithmetic stay float32.
 from __future__ import annotations
 
 import contextlib
+import io
+from pathlib import Path
 
 import torch
 from diffusers import DDIMScheduler, DDPMScheduler
@@ -130,3 +132,23 @@ class DiffusionPolicyModel(nn.Module):
             eps = self.denoise(x, t.expand(x.shape[0]).to(cond.device), cond)
             x = scheduler.step(eps, t, x, generator=generator).prev_sample
         return self.normalize["action"].inverse(x)
+
+
+def empty_stats(cfg: DPConfig) -> dict:
+    """Normaliser placeholders of the right shapes (a checkpoint's buffers overwrite them)."""
+    z = lambda n: (torch.zeros(n), torch.ones(n))  # noqa: E731
+    out = {"action": z(cfg.action_dim), "state": z(cfg.state_dim)}
+    if cfg.tactile:
+        out["markers"] = z(cfg.marker_motion_dim // cfg.obs_horizon)
+    return out
+
+
+def load_checkpoint(source: Path | bytes, name: str | Path | None = None) -> dict:
+    """A checkpoint or policy file (a path, or its bytes already read, ``name`` naming it in errors)."""
+    where = name or source
+    try:
+        return torch.load(io.BytesIO(source) if isinstance(source, bytes) else source, map_location="cpu",
+                          weights_only=False)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a damaged file
+        raise ValueError(f"{where} cannot be read ({type(e).__name__}: {e}); it is damaged: delete it to "
+                         "start over, or train into another --out") from None

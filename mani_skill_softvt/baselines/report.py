@@ -27,7 +27,8 @@ from pathlib import Path
 
 from ..evaluation.metrics import group_summaries, is_dsr_success, paired_comparison, percent, percent_ci, summarize
 from ..evaluation.report import rt_series
-from ..evaluation.runner import policy_tag, read_records
+from ..evaluation.run import policy_tag
+from ..evaluation.runner import read_records
 from ..fileio import atomic_write, atomic_write_json
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B

@@ -156,9 +156,9 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
     snapshot (:func:`closed_loop_summaries`)."""
     from tqdm import tqdm
 
-    from ..evaluation.protocols import episodes
+    from ..evaluation.run import RunConfig
     from ..evaluation.runner import evaluate
-    from .agent import read_policy_file, required_modes
+    from .agent import resolve_policy_file
 
     every = run_snapshots(run)
     if not every:
@@ -168,13 +168,13 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
     if missing:
         raise ValueError(f"{run}: no snapshots of steps {missing} (it has {[snapshot_step(s) for s in every]}); "
                          "train further, or pick others with --steps")
-    eps = episodes(suite, "id", tasks, per_task)
     for snap in snaps:
-        cfg, ckpt = read_policy_file(snap)
+        source, cfg, ckpt = resolve_policy_file(str(snap.resolve()))  # one read: config, modes, hash
+        run = RunConfig.resolve(source, suite=suite, tasks=tasks if tasks is not None else "all",
+                                episodes_per_task=per_task)
         out = closed_loop_dir(results_dir, run_id(cfg, ckpt.get("data_key", ""))) / f"{suite}_id_{snap.stem}.jsonl"
-        obs_mode, control_mode = required_modes(snap)
-        with tqdm(total=len(eps), desc=f"closed loop {snap.stem}", unit="episode") as bar:
-            evaluate(eps, str(snap.resolve()), out, workers, obs_mode, control_mode, progress=bar.update)
+        with tqdm(total=len(run.episodes()), desc=f"closed loop {snap.stem}", unit="episode") as bar:
+            evaluate(run, out, workers=workers, progress=bar.update)
     return closed_loop_summaries(results_dir)
 
 

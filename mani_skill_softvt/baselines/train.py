@@ -44,7 +44,7 @@ from .config import (
     recipe_config,
 )
 from .dataset import DemoWindows, data_key, load_windows
-from .model import DiffusionPolicyModel, noise_scheduler
+from .model import DiffusionPolicyModel, empty_stats, load_checkpoint, noise_scheduler  # noqa: F401  (re-exported)
 
 CHECKPOINT, POLICY, CACHE = "checkpoint.pt", "policy.pt", "data_cache"
 
@@ -86,15 +86,6 @@ def batch_indices(cfg: DPConfig, samples: int, step: int) -> np.ndarray:
     if samples < cfg.batch_size:
         return perm
     return perm[k * cfg.batch_size:(k + 1) * cfg.batch_size]
-
-
-def empty_stats(cfg: DPConfig) -> dict:
-    """Normaliser placeholders of the right shapes (a checkpoint's buffers overwrite them)."""
-    z = lambda n: (torch.zeros(n), torch.ones(n))  # noqa: E731
-    out = {"action": z(cfg.action_dim), "state": z(cfg.state_dim)}
-    if cfg.tactile:
-        out["markers"] = z(cfg.marker_motion_dim // cfg.obs_horizon)
-    return out
 
 
 class Training:
@@ -174,14 +165,6 @@ def save(path: Path, obj: dict) -> None:
             torch.save(obj, fh)
 
     atomic_write(path, write)
-
-
-def load_checkpoint(path: Path) -> dict:
-    try:
-        return torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a damaged file
-        raise ValueError(f"{path} cannot be read ({type(e).__name__}: {e}); it is damaged: delete it to "
-                         "start over, or train into another --out") from None
 
 
 def check_same_run(ckpt: dict, cfg: DPConfig, path: Path, data_key: str | None = None, steps: int | None = None) -> None:

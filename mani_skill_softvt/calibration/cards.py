@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import __version__
+from ..version import __version__
 from ..fileio import atomic_write_json, read_json
 from ..paths import CALIBRATION_DIR, missing_data_hint
 from ..physics.constants import physics_signature, signature_mismatch

@@ -15,7 +15,6 @@ from __future__ import annotations
 TRAIN_SEED_BASE = 0
 ID_SEED_BASE = 50_000_000
 CALIBRATION_SEED_BASE = 10_000
-TRAIN_DEMOS_PER_TASK = 100  # the paper's training set: 100 expert demos per task
 ID_EPISODES_PER_TASK = 50  # the paper's ID protocol: 50 held-out initial states per task
 
 

@@ -42,7 +42,8 @@ from ..tasks.constants import MAX_EPISODE_STEPS
 from ..tasks.suites import SUITES, task_spec
 from .protocols import episodes
 from .report import plot_traces, write_report
-from .runner import episode_record, read_records, records_stem
+from .run import records_stem
+from .runner import episode_record, read_records
 from .wrapper import make_env
 
 IMAGE_PREFIX, STATE_FEATURE = "observation.images.", "observation.state"

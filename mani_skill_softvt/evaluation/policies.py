@@ -1,20 +1,158 @@
-"""The policy interface of the evaluation and the built-in policies.
+"""The policy door of the evaluation: every way a policy is named, resolved once, and the built-in policies.
 
 The contract (``reset``, ``act``, ``name``, ``privileged``) is :mod:`mani_skill_softvt.policy`.
 Only the built-in scripted experts are privileged: the runner binds them to the env they plan on
 and labels their records so; every other policy (in process, or served over ``ws://``) never
 holds the env.
+
+A policy is named by a spec: a built-in name (``expert``, ``hold``, ...), ``module:Class``,
+``ws://HOST:PORT`` of a policy server, or a file another package knows how to read (the trained
+baselines' ``.pt``). :func:`resolve_policy` turns a spec into a :class:`PolicySource` once, in the
+process that starts a run: its kind, the SHA-256 of its file, and what it needs of the env (the
+obs and control modes it was trained for, its camera size), read from one read of the file. The
+source is what workers get; :meth:`PolicySource.load` builds the policy from it.
+
+Kinds other than these three register themselves as entry points of the group
+``mani_skill_softvt.policy_kinds`` (a :class:`PolicyKind`): the baselines register their policy
+files there (``pyproject.toml``), so the evaluation never imports the baselines, and any package
+can add its own kind the same way.
 """
 
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import metadata
 
 import numpy as np
 
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
 from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
+
+POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
+REMOTE_PREFIXES = ("ws://", "wss://")
+IMAGE_OBS_MODES = ("rgb", "rgb+tactile")
+
+
+@dataclass(frozen=True)
+class PolicySource:
+    """A policy spec, resolved (module docstring). ``obs_modes`` / ``control_modes``: those it can
+    run in (None: any; the first is its default), ``camera_size``: (height, width) it was trained
+    on (None: the env's native size); ``sha256``: of its file, for a policy that is one."""
+
+    spec: str
+    kind: str
+    sha256: str | None = None
+    obs_modes: tuple[str, ...] | None = None
+    control_modes: tuple[str, ...] | None = None
+    camera_size: tuple[int, int] | None = None
+
+    def load(self) -> Policy:
+        return policy_kind(self.kind).load(self)
+
+
+class PolicyKind:
+    """One way of naming a policy: which specs are its, what a spec resolves to, how to build it."""
+
+    name: str = ""
+
+    def matches(self, spec: str) -> bool:
+        raise NotImplementedError
+
+    def resolve(self, spec: str) -> PolicySource:
+        return PolicySource(spec, self.name)
+
+    def load(self, source: PolicySource) -> Policy:
+        raise NotImplementedError
+
+
+class _RemoteKind(PolicyKind):
+    name = "remote"
+
+    def matches(self, spec):
+        return spec.startswith(REMOTE_PREFIXES)
+
+    def resolve(self, spec):
+        return PolicySource(spec, self.name, obs_modes=IMAGE_OBS_MODES)  # a server is sent camera images
+
+    def load(self, source):
+        try:
+            from .remote import remote_policy_from_spec
+        except ModuleNotFoundError as e:
+            if e.name != "openpi_client":
+                raise
+            raise ValueError(f"--policy {source.spec} needs openpi's websocket client: pip install "
+                             "'mani-skill-softvt[remote]' (openpi-client 0.1.2 needs NumPy < 2, so it is on the default "
+                             "stack, scripts/setup.sh, not the LeRobot one)") from None
+        return remote_policy_from_spec(source.spec)
+
+
+class _BuiltinKind(PolicyKind):
+    name = "builtin"
+
+    def matches(self, spec):
+        return spec in BUILTIN
+
+    def load(self, source):
+        return BUILTIN[source.spec]()
+
+
+class _ClassKind(PolicyKind):
+    """``module:Class``: user code, imported and constructed without arguments in each process."""
+
+    name = "class"
+
+    def matches(self, spec):
+        return ":" in spec
+
+    def _class(self, spec):
+        module, cls = spec.split(":", 1)
+        try:
+            return getattr(importlib.import_module(module), cls)
+        except (ImportError, AttributeError) as e:
+            raise ValueError(f"cannot load policy '{spec}': {e}") from e
+
+    def resolve(self, spec):
+        size = getattr(self._class(spec), "camera_size", None)
+        return PolicySource(spec, self.name, camera_size=None if size is None else tuple(int(v) for v in size))
+
+    def load(self, source):
+        policy = self._class(source.spec)()
+        for method in ("reset", "act"):
+            if not callable(getattr(policy, method, None)):
+                raise ValueError(f"policy '{source.spec}' has no {method}() method")
+        return policy
+
+
+@lru_cache(maxsize=1)
+def policy_kinds() -> tuple[PolicyKind, ...]:
+    """Every kind, in the order a spec is tried: the registered ones, then remote, built-in, class."""
+    registered = [ep.load() for ep in sorted(metadata.entry_points(group=POLICY_KINDS_GROUP), key=lambda e: e.name)]
+    return (*registered, _RemoteKind(), _BuiltinKind(), _ClassKind())
+
+
+def policy_kind(name: str) -> PolicyKind:
+    for kind in policy_kinds():
+        if kind.name == name:
+            return kind
+    raise ValueError(f"no policy kind '{name}' is installed (registered: {[k.name for k in policy_kinds()]})")
+
+
+def resolve_policy(spec: str) -> PolicySource:
+    """The :class:`PolicySource` of ``spec``; ValueError naming the spec for one no kind takes."""
+    spec = str(spec)
+    for kind in policy_kinds():
+        if kind.matches(spec):
+            return kind.resolve(spec)
+    raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}), module:Class, ws://HOST:PORT, nor a "
+                     f"file an installed policy kind reads ({[k.name for k in policy_kinds()[:-3]] or 'none'}; a trained "
+                     "baseline's .pt is read once the package is installed: pip install -e .)")
+
+
+def load_policy(spec: str) -> Policy:
+    """The policy ``spec`` names, built (:func:`resolve_policy`, then :meth:`PolicySource.load`)."""
+    return resolve_policy(spec).load()
 
 
 def _tcp_action(obs, closure: float) -> np.ndarray:
@@ -64,54 +202,3 @@ class RandomPolicy(Policy):
 
 BUILTIN = {"expert": ScriptedExpertPolicy, "expert_cartesian": CartesianExpertPolicy, "hold": HoldPolicy,
            "random": RandomPolicy}
-
-
-def policy_camera_size(spec: str) -> tuple[int, int] | None:
-    """The camera size (height, width) the policy ``spec`` asks for (:attr:`Policy.camera_size`),
-    read without building it: a baseline's ``policy.pt`` says it, a ``module:Class`` as a class
-    attribute; built-in policies and policy servers (whose size the evaluator is told,
-    ``evaluate --camera-size``) take the env's."""
-    if spec.endswith(".pt"):
-        from ..baselines.agent import camera_render_size, read_policy_file
-
-        return camera_render_size(read_policy_file(Path(spec))[1])
-    if spec in BUILTIN or spec.startswith(("ws://", "wss://")) or ":" not in spec:
-        return None
-    module, cls = spec.split(":", 1)
-    try:
-        size = getattr(getattr(importlib.import_module(module), cls), "camera_size", None)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"cannot load policy '{spec}': {e}") from e
-    return None if size is None else tuple(int(v) for v in size)
-
-
-def load_policy(spec: str) -> Policy:
-    """A built-in policy name, ``module:Class`` of a user policy (constructed without arguments),
-    ``ws://HOST:PORT`` of a policy server, or the ``policy.pt`` of a trained baseline."""
-    if spec in BUILTIN:
-        return BUILTIN[spec]()
-    if spec.endswith(".pt"):  # a trained Diffusion Policy baseline (mani_skill_softvt.baselines)
-        from ..baselines.agent import DiffusionPolicyAgent
-        return DiffusionPolicyAgent(spec)
-    if spec.startswith(("ws://", "wss://")):  # a policy server (openpi protocol), see evaluation/remote.py
-        try:
-            from .remote import remote_policy_from_spec
-        except ModuleNotFoundError as e:
-            if e.name != "openpi_client":
-                raise
-            raise ValueError(f"--policy {spec} needs openpi's websocket client: pip install 'mani-skill-softvt[remote]' "
-                             "(openpi-client 0.1.2 needs NumPy < 2, so it is on the default stack, scripts/setup.sh, "
-                             "not the LeRobot one)") from None
-        return remote_policy_from_spec(spec)
-    if ":" not in spec:
-        raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}) nor of the form module:Class")
-    module, cls = spec.split(":", 1)
-    try:
-        obj = getattr(importlib.import_module(module), cls)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"cannot load policy '{spec}': {e}") from e
-    policy = obj()
-    for method in ("reset", "act"):
-        if not callable(getattr(policy, method, None)):
-            raise ValueError(f"policy '{spec}' has no {method}() method")
-    return policy

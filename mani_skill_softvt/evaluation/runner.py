@@ -33,18 +33,17 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 import time
 from collections import defaultdict
 from pathlib import Path
 
-from .. import __version__
-from ..fileio import append_jsonl, read_jsonl_lines
+from ..version import __version__
+from ..fileio import append_jsonl, file_sha256, read_jsonl_lines
 from ..observations import info_bool
 from ..parallel import WorkerDiedError, run_tasks
 from ..stack import software_stack
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .protocols import episode_key
+from .run import RunConfig, recorded_camera_size, tactile_model
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
 UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
@@ -79,55 +78,17 @@ def read_records(path: Path) -> list[dict]:
     return out
 
 
-def run_records(path: Path, policy: str, obs_mode: str, control_mode: str,
-                camera_size: tuple[int, int] | None = None, policy_sha256: str | None = None) -> dict[tuple, dict]:
-    """The verified records of one run configuration in ``path``, by episode key (resume matches on
-    the configuration: another policy, obs mode, control mode or camera size is another run, and
-    so is another policy file's content; records from before the hash was kept match on the rest)."""
-    config = {"policy": policy, "obs_mode": obs_mode, "control_mode": control_mode,
-              "tactile_model": tactile_model(obs_mode), "camera_size": recorded_camera_size(obs_mode, camera_size)}
-    return {episode_key(r): r for r in read_records(path) if all(record_field(r, k) == v for k, v in config.items())
-            and r.get("policy_sha256", policy_sha256) == policy_sha256}
+def run_records(path: Path, run: RunConfig) -> dict[tuple, dict]:
+    """The verified records of ``run`` in ``path``, by episode key (resume matches on the run's
+    fields: another policy, obs mode, control mode or camera size is another run, and so is another
+    policy file's content; records from before the hash was kept match on the rest)."""
+    fields = run.record_fields()
+    return {episode_key(r): r for r in read_records(path) if is_run_record(r, fields, run.policy.sha256)}
 
 
-def policy_file_sha256(spec: str) -> str | None:
-    """SHA-256 of the file of a trained policy (a spec naming a ``.pt``), None for other policies
-    (built in, ``module:Class``, a server), whose code is not a file the evaluator can pin."""
-    if not str(spec).endswith(".pt"):
-        return None
-    digest = hashlib.sha256()
-    with open(spec, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
-def policy_tag(spec: str) -> str:
-    """A file-name-safe name of a policy spec: a trained baseline by its run directory
-    (``vo-c-cpu``), a snapshot or an exported policy by its file (``vo-c-cpu_step003000``); a
-    ``ws://host:port`` or ``module:Class`` with its punctuation replaced."""
-    source = str(spec)
-    if source.endswith(".pt"):
-        source = Path(spec).parent.name if Path(spec).name == "policy.pt" else Path(spec).stem
-    return re.sub(r"[^A-Za-z0-9-]+", "_", source).strip("_")
-
-
-def records_stem(suite: str, protocol: str, spec: str) -> str:
-    """The stem of an evaluation's files (records, report, plots): ``<suite>_<protocol>_<policy tag>``."""
-    return f"{suite}_{protocol}_{policy_tag(spec)}"
-
-
-def tactile_model(obs_mode: str) -> int | None:
-    """The tactile model version of this package's frames in ``obs_mode`` (None without touch)."""
-    return TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
-
-
-def recorded_camera_size(obs_mode: str, camera_size: tuple[int, int] | None) -> list[int] | None:
-    """The ``camera_size`` a record of a run in ``obs_mode`` carries: the cameras' (height, width),
-    the native 224x224 unless asked otherwise; None in obs modes without images."""
-    from ..observations import NATIVE_CAMERA_SIZE
-
-    return [int(v) for v in (camera_size or NATIVE_CAMERA_SIZE)] if str(obs_mode).startswith("rgb") else None
+def is_run_record(rec: dict, fields: dict, policy_sha256: str | None) -> bool:
+    return all(record_field(rec, k) == v for k, v in fields.items()) and \
+        rec.get("policy_sha256", policy_sha256) == policy_sha256
 
 
 def record_field(rec: dict, key: str):
@@ -214,80 +175,60 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
     return _seal(rec)
 
 
-def worker_died_record(episode: dict, reason: str, config: dict, rigid: bool) -> dict:
+def worker_died_record(episode: dict, reason: str, run: RunConfig, rigid: bool) -> dict:
     """The record of an episode whose process died: a failure, nothing measured (``r_max`` None)."""
-    rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **config,
-           "camera_size": recorded_camera_size(config["obs_mode"], config.get("camera_size")),
-           "tactile_model": tactile_model(config["obs_mode"]), "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
-           "steps": None, "r_max": None, "collapsed_steps": None, "tau_o": None, "rigid": rigid, "deformation_trace": [], "wall_s": None,
-           "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack()}}
-    if rec.get("policy_sha256", "") is None:
-        del rec["policy_sha256"]  # kept only for policy files, as in run_episode
+    rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **run.record_fields(),
+           "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
+           "steps": None, "r_max": None, "collapsed_steps": None, "tau_o": None, "rigid": rigid, "deformation_trace": [],
+           "wall_s": None, "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack()}}
+    if run.policy.sha256 is not None:  # kept only for policy files, as in run_episode
+        rec["policy_sha256"] = run.policy.sha256
     return _seal(rec)
 
 
-def _worker(batch: list[dict], policy_spec: str, obs_mode: str, control_mode: str, camera_size, policy_sha256,
-            queue) -> int:
-    from .policies import load_policy
+def _worker(batch: list[dict], run: RunConfig, queue) -> int:
     from .wrapper import make_env
 
-    policy = load_policy(policy_spec)
-    if policy_sha256 is not None and policy_file_sha256(policy_spec) != policy_sha256:
-        raise ValueError(f"{policy_spec} changed while the evaluation started (its SHA-256 is not the one its records "
-                         "will carry); evaluate again once it is no longer being written")
-
+    policy = run.policy.load()  # a policy file is read once here, and checked against the run's hash
     # Every reset rebuilds the scene (SoftBodyEnv), so an episode is the same whichever ran before
     # it in this env, a blown-up one included: a resumed run and --reproduce match a full run.
-    env = make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=obs_mode, control_mode=control_mode,
-                   camera_size=camera_size)
+    env = make_env(batch[0]["suite"], batch[0]["task_id"], obs_mode=run.obs_mode, control_mode=run.control_mode,
+                   camera_size=run.camera_size)
     try:
         for ep in batch:
             queue.put(("start", ep))
-            rec = run_episode(env, policy, ep, policy_spec=policy_spec, policy_sha256=policy_sha256)
+            rec = run_episode(env, policy, ep, policy_spec=run.policy.spec, policy_sha256=run.policy.sha256)
             queue.put(("record", rec))
     finally:
         env.close()
     return len(batch)
 
 
-def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1, obs_mode: str = "state_dict",
-             control_mode: str = "pd_ee_pose", progress=None, ray_address: str | None = None,
-             camera_size: tuple[int, int] | None = None) -> list[dict]:
-    """Run the episodes not yet in ``out`` and return every record of the requested episodes.
+def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, workers: int = 1, progress=None,
+             ray_address: str | None = None) -> list[dict]:
+    """Run the episodes of ``run`` (or ``episodes``, e.g. a reproduction's) not yet in ``out`` and
+    return every record of them.
 
-    The cameras render at ``camera_size`` (height, width), by default the size the policy asks for
-    (:func:`~mani_skill_softvt.evaluation.policies.policy_camera_size`; 224x224 if none); asking a
-    policy that says another size is an error. Only records of the same configuration (policy,
-    obs mode, control mode, camera size, and the policy file's SHA-256) count as done.
+    Only records of the same run (:meth:`RunConfig.record_fields` and the policy file's SHA-256)
+    count as done. The records file is read once; new records are appended as they come.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
-    from ..observations import camera_sensor_configs
     from ..tasks.suites import get_suite
-    from .policies import policy_camera_size
 
     out = Path(out)
-    wanted = policy_camera_size(policy_spec)
-    if camera_size is not None and wanted is not None and tuple(camera_size) != tuple(wanted):
-        raise ValueError(f"policy {policy_spec} was trained on {wanted[0]}x{wanted[1]} cameras; evaluate it at that "
-                         f"size (leave camera_size out), not {camera_size[0]}x{camera_size[1]}")
-    camera_size = tuple(camera_size or wanted or ()) or None
-    camera_sensor_configs(camera_size)  # a size too small is an error here, naming it, not in a worker
-    config = {"policy": policy_spec, "obs_mode": obs_mode, "control_mode": control_mode, "camera_size": camera_size,
-              "policy_sha256": policy_file_sha256(policy_spec)}
-    done = run_records(out, **config)
+    episodes = run.episodes() if episodes is None else episodes
+    done = run_records(out, run)
     todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
         progress(len(episodes) - len(todo))
     # A dead worker takes its batch's later episodes with it: run the rest again. Every death
     # records the episode it killed, so this ends.
-    ran = bool(todo)
     while todo:
         batches = defaultdict(list)
         for ep in todo:
             batches[(ep["suite"], ep["task_id"])].append(ep)
-        items = [(b, policy_spec, obs_mode, control_mode, camera_size, config["policy_sha256"])
-                 for b in batches.values()]
+        items = [(b, run) for b in batches.values()]
         in_flight, deaths = {}, 0
         for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True):
             if kind == "message":
@@ -297,23 +238,23 @@ def evaluate(episodes: list[dict], policy_spec: str, out: Path, workers: int = 1
                     in_flight[key] = payload
                     continue
                 in_flight.pop(key, None)
-                append_jsonl(out, payload)  # written at once, so a kill loses nothing
+                rec = payload
             elif kind == "died":
                 index, reason = value
                 batch = items[index][0]
                 ep = in_flight.pop((batch[0]["suite"], batch[0]["task_id"]), None)
                 if ep is None:  # died building its env: not an episode's doing, and would recur
                     raise WorkerDiedError(index, f"{reason} before its first episode began")
-                append_jsonl(out, worker_died_record(ep, reason, config, get_suite(ep["suite"]).rigid))
+                rec = worker_died_record(ep, reason, run, get_suite(ep["suite"]).rigid)
                 deaths += 1
             else:
                 continue
+            append_jsonl(out, rec)  # written at once, so a kill loses nothing
+            done[episode_key(rec)] = rec
             if progress is not None:
                 progress(1)
-        done = run_records(out, **config)
         todo = [ep for ep in todo if episode_key(ep) not in done] if deaths else []
-    records = run_records(out, **config) if ran else done
-    return [records[episode_key(ep)] for ep in episodes if episode_key(ep) in records]
+    return [done[episode_key(ep)] for ep in episodes if episode_key(ep) in done]
 
 
 RUN_FIELDS = ("policy", "obs_mode", "control_mode", "camera_size", "policy_sha256")  # what names a run
@@ -378,24 +319,25 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
                          "camera size, policy file); reproduce a file of one run")
     first = records[0]
     spec, sha = first["policy"], next(iter(hashes), None)
-    if sha is not None:
-        if not Path(spec).is_file():
-            raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
-                             "name it from (the repository root for committed policies)")
-        if policy_file_sha256(spec) != sha:
-            raise ValueError(f"{path}: {spec} is not the policy file these records were made with (its SHA-256 "
-                             f"differs from their policy_sha256 {sha[:12]}...): it was replaced or retrained")
+    if sha is not None and not Path(spec).is_file():
+        raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
+                         "name it from (the repository root for committed policies)")
+    if sha is not None and file_sha256(Path(spec)) != sha:
+        raise ValueError(f"{path}: {spec} is not the policy file these records were made with (its SHA-256 "
+                         f"differs from their policy_sha256 {sha[:12]}...): it was replaced or retrained")
+    size = first.get("camera_size")
+    run = RunConfig.resolve(spec, first["obs_mode"], first["control_mode"], tuple(size) if size else None,
+                            suite=first["suite"], protocol="id" if first["condition"] == "id" else "ood")
     chosen, count = [], defaultdict(int)
     for r in records:
         key = (r["suite"], r["task_id"])
         if per_task is None or count[key] < per_task:
             count[key] += 1
             chosen.append(r)
-    size = first.get("camera_size")
     with tempfile.TemporaryDirectory(prefix="reproduce-") as tmp:
-        new = evaluate([{k: r[k] for k in ("suite", "task_id", "condition", "seed")} for r in chosen], spec,
-                       Path(tmp) / "records.jsonl", workers, first["obs_mode"], first["control_mode"], progress=progress,
-                       camera_size=tuple(size) if size else None)
+        new = evaluate(run, Path(tmp) / "records.jsonl",
+                       [{k: r[k] for k in ("suite", "task_id", "condition", "seed")} for r in chosen], workers,
+                       progress=progress)
     by_key = {episode_key(r): r for r in new}
     return [(r, by_key.get(episode_key(r)),
              record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])

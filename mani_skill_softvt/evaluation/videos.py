@@ -203,20 +203,20 @@ def compare_records(stored: dict, rerun: dict, capped: bool) -> list[str]:
     return out
 
 
-def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = "rgb+tactile",
-                         control_mode: str = "pd_ee_pose", max_steps: int | None = None, fps: int = FPS,
-                         camera_size: tuple[int, int] | None = None) -> dict:
-    """Re-run ``episode`` with the policy and write its video to ``path`` (mp4, atomically); the re-run record.
+def record_episode_video(episode: dict, run, path, obs_mode: str = "rgb+tactile", max_steps: int | None = None,
+                         fps: int = FPS) -> dict:
+    """Re-run ``episode`` with the policy of ``run`` (a :class:`~mani_skill_softvt.evaluation.run.RunConfig`:
+    its control mode and camera size) and write its video to ``path`` (mp4, atomically); the
+    re-run record.
 
     ``episode`` is an evaluation record or just its (suite, task_id, condition, seed). Where it is
     a record (it has a ``deformation_trace``), the re-run is checked against it and a
     ``RuntimeWarning`` says where they differ (a non-deterministic policy, another package
-    version). ``max_steps`` truncates the episode (short previews, tests). The cameras render at
-    ``camera_size``, by default the size the policy asks for, as in its evaluation.
+    version). ``max_steps`` truncates the episode (short previews, tests). The cameras render at the
+    run's camera size, as in its evaluation.
     """
     from ..tasks import constants as C
     from ..tasks.suites import get_suite
-    from .policies import load_policy
     from .runner import run_episode
     from .wrapper import make_env
 
@@ -233,9 +233,9 @@ def record_episode_video(episode: dict, policy_spec: str, path, obs_mode: str = 
 
     horizon = max_steps or C.MAX_EPISODE_STEPS
     limit = {"max_episode_steps": max_steps} if max_steps else {}
-    policy = load_policy(policy_spec)
-    env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=control_mode,
-                   camera_size=camera_size or getattr(policy, "camera_size", None), **limit)
+    policy = run.policy.load()
+    env = make_env(episode["suite"], int(episode["task_id"]), obs_mode=obs_mode, control_mode=run.control_mode,
+                   camera_size=run.camera_size, **limit)
     result = {}
 
     def write(tmp: Path) -> None:

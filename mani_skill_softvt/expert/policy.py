@@ -40,9 +40,8 @@ class ScriptedExpertPolicy(Policy):
         self.env = env
 
     def reset(self, instruction: str, seed: int | None) -> None:
-        from .solution import expert_card
-
-        self.closure = (draw_closure(expert_card(self.env), 0 if seed is None else int(seed))  # the env's card
+        # The env's card: the one the DSR scorer and the dense reward read too.
+        self.closure = (draw_closure(self.env.unwrapped.calibration_card, 0 if seed is None else int(seed))
                         if self.fixed_closure is None else self.fixed_closure)
         self.plan = plan_pick_place(self.env, self.closure, self.planner, strict=self.strict)
         self.name = f"scripted_expert[{self.plan.planner}]"  # the planner that actually ran (receipts)

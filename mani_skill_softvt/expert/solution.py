@@ -18,19 +18,12 @@ motion-planning format) or ``pd_ee_pose`` (the paper's absolute TCP pose), eithe
 
 from __future__ import annotations
 
-from ..calibration.cards import CalibrationCard
 from .pick_place import DEFAULT_PLANNER
 
 
 SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
                "around the table, target and other instance (Cartesian fallback); gripper closure drawn from the "
                "object's calibrated envelope [g_min, g_max]")
-
-
-def expert_card(env) -> CalibrationCard:
-    """The calibration card the expert draws closures from: the env's own, which the DSR scorer and
-    the dense reward read too (the task's soft asset's; rigid twins: their soft asset's)."""
-    return env.unwrapped.calibration_card
 
 
 def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = None, planner: str = DEFAULT_PLANNER,

@@ -9,7 +9,6 @@ import numpy as np
 # 100 Hz with Newton substeps was unstable (15 g fingers, one-step-late contact forces).
 SIM_FREQ = 240
 CONTROL_FREQ = 20
-SIM_STEPS_PER_CONTROL = SIM_FREQ // CONTROL_FREQ
 
 # Newton substeps per lockstep tick and VBD iterations per substep. VBD is a Gauss-Seidel
 # solver: with E ~ 5e4 Pa and ~8 mm elements a node's elastic stiffness is ~60x its inertia
@@ -39,9 +38,6 @@ SOFT_CONTACT_KD = 1.0e-2
 PARTICLE_RADIUS = 1.0e-3
 # Contact detection margin [m].
 SOFT_CONTACT_GAP = 4.0e-3
-
-DEFAULT_TET_DAMPING = 1.0  # Pa*s
-DEFAULT_OBJECT_FRICTION = 1.0
 
 # Health check (a blow-up ends the episode).
 MAX_PARTICLE_SPEED = 5.0  # m/s: nothing in a tabletop pick-and-place moves this fast

@@ -29,7 +29,6 @@ FOV_HEIGHT = IMAGE_HEIGHT * PIXEL_SIZE  # m, along image rows (pad y)
 # The Mini's gel is ~2 mm thick: an object can push its surface in by at most that much before
 # reaching the rigid acrylic backing, so penetration is clamped to [0, GEL_THICKNESS].
 GEL_THICKNESS = 2.0e-3  # m
-MAX_PENETRATION = GEL_THICKNESS  # m; the clamp (alias kept for callers of the older name)
 # Gel compliance. GelSight elastomers are soft, clear silicones of about Shore A 5 (Yuan, Dong &
 # Adelson, "GelSight", Sensors 2017); Gent's Shore-to-modulus relation puts that at E ~ 0.3 MPa.
 # Silicone rubber is nearly incompressible, nu ~ 0.47-0.49. A thin layer bonded to rigid acrylic
@@ -91,6 +90,3 @@ SHEAR_DECAY = 12.0  # px (~0.7 mm)
 # it, so that frames of one model are never mixed with another's (data saved without it is 1).
 # 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's outward flow.
 MODEL_VERSION = 2
-
-# Sensor rate (the control rate: one frame per control step).
-FRAME_RATE = 20

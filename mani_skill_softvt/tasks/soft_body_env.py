@@ -361,10 +361,6 @@ class SoftBodyEnv(BaseEnv):
             local[:, 2] -= sensor.frame.sink
         return polygons_mask(contact_polygons(local, faces, sensor.renderer.view_half_extents))
 
-    def pad_poses(self) -> dict[str, np.ndarray]:
-        """Both fingers' pad poses: side -> 4x4 world pose."""
-        return {side: self.pad_pose(side) for side in SIDES}
-
     def tactile_frames(self) -> dict:
         """GelSight frames of both fingers for the current state (side -> TactileFrame), in any obs mode."""
         for sensor in self._tactile.values():

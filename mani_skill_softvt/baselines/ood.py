@@ -1,0 +1,268 @@
+"""The OOD protocol's results beside the paper's (Finding 4): pooled, per condition, under stiffness shift.
+
+    python -m mani_skill_softvt.baselines.ood baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
+        baselines/results/object_soft_ood_vt-c-cpu.jsonl --out baselines/results
+
+Each OOD records file is read with its policy's ID records (the same directory's
+``<suite>_id_<policy>.jsonl``, each record verified against its hash). The OOD protocol runs the
+first 10 ID initial states of every task under each of nine single-factor conditions, so every
+OOD episode has an ID twin on the same seed: the comparisons against ID are paired (exact
+McNemar) on those twins, beside the paper's Delta against its full ID entry. Writes
+``<out>/ood.md`` and ``.json`` and ``<out>/ood_curves.png``:
+
+- pooled over the nine conditions: TSR, DSR, TSR - DSR, with the change against ID (all 50 ID
+  seeds a task, as the paper's Delta, and paired on the 10 twins);
+- per condition, each variant's TSR / DSR beside the paper's Diffusion Policy table;
+- under stiffness shift (E x0.5, x0.8, x1.0 = the ID twins, x2.0): TSR, DSR and R_max median
+  [IQR] over all episodes, as the paper's stiffness table;
+- where two variants ran the same episodes, VO against VT per condition and pooled (paired).
+
+A run still in progress is reported as it stands: each row says how many episodes it holds.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from ..evaluation.metrics import paired_comparison, percent, percent_ci, summarize
+from ..evaluation.protocols import episode_key
+from ..evaluation.runner import read_records
+from ..fileio import atomic_write, atomic_write_json
+from ..tasks.suites import OOD_CONDITIONS
+from .report import variant_of
+
+# The paper's per-condition OOD table for Diffusion Policy on Object-Soft (TSR, DSR %; 100 episodes each),
+# and its pooled OOD row with the change against its ID entry.
+PAPER_DP_OBJECT_SOFT = {
+    "vo-c": {"light_67.5": (0, 0), "light_180": (37, 33), "light_270": (0, 0), "mass_x1.25": (41, 38),
+             "mass_x1.75": (40, 35), "mass_x2.5": (36, 33), "youngs_modulus_x0.5": (33, 32),
+             "youngs_modulus_x0.8": (37, 31), "youngs_modulus_x2.0": (39, 37)},
+    "vt-c": {"light_67.5": (1, 1), "light_180": (36, 30), "light_270": (0, 0), "mass_x1.25": (42, 34),
+             "mass_x1.75": (43, 38), "mass_x2.5": (33, 27), "youngs_modulus_x0.5": (41, 30),
+             "youngs_modulus_x0.8": (45, 33), "youngs_modulus_x2.0": (39, 32)},
+}
+PAPER_DP_POOLED = {"vo-c": (29.2, -8.2, 26.6, -7.0), "vt-c": (31.2, -8.8, 25.0, -5.4)}  # TSR, dTSR, DSR, dDSR
+# The paper's stiffness table for Diffusion Policy (E scale -> TSR, DSR, R_max median, IQR).
+PAPER_DP_STIFFNESS = {
+    "vo-c": {1.0: (42, 39, 0.63, (0.47, 0.75)), 0.5: (33, 32, 0.66, (0.06, 0.76)), 0.8: (37, 31, 0.63, (0.06, 0.79)),
+             2.0: (39, 37, 0.60, (0.37, 0.71))},
+    "vt-c": {1.0: (42, 30, 0.69, (0.48, 0.97)), 0.5: (41, 30, 0.76, (0.57, 0.98)), 0.8: (45, 33, 0.75, (0.54, 0.96)),
+             2.0: (39, 32, 0.63, (0.41, 0.92))},
+}
+STIFFNESS = {0.5: "youngs_modulus_x0.5", 0.8: "youngs_modulus_x0.8", 1.0: "id", 2.0: "youngs_modulus_x2.0"}
+
+
+def paper_key(variant: str) -> str:
+    """``vt-c,cpu,rgb+depth`` -> ``vt-c``: the paper's configuration a variant corresponds to."""
+    return variant.split(",")[0]
+
+
+def id_twins(ood: list[dict], id_records: list[dict]) -> list[dict]:
+    """The ID records on the OOD episodes' seeds (the protocol's shared initial states)."""
+    seeds = {(r["suite"], r["task_id"], r["seed"]) for r in ood}
+    return [r for r in id_records if (r["suite"], r["task_id"], r["seed"]) in seeds]
+
+
+def against_twins(ood: list[dict], twins: list[dict], outcome: str) -> dict:
+    """OOD against ID, paired on the seed: the ID twin of every OOD episode (condition set to match)."""
+    by_seed = {(r["suite"], r["task_id"], r["seed"]): r for r in twins}
+    pairs_a, pairs_b = [], []
+    for i, r in enumerate(ood):
+        twin = by_seed.get((r["suite"], r["task_id"], r["seed"]))
+        if twin is not None:  # one ID twin serves the nine conditions: each pair gets its own key
+            key = {"suite": r["suite"], "task_id": r["task_id"], "condition": f"pair{i}", "seed": r["seed"]}
+            pairs_a.append({**r, **key})
+            pairs_b.append({**twin, **key})
+    return paired_comparison(pairs_a, pairs_b, outcome)
+
+
+def r_max_stats(records: list[dict]) -> dict:
+    """Median and interquartile range of R_max over the episodes that measured it."""
+    x = np.array([r["r_max"] for r in records if r.get("r_max") is not None], float)
+    if not x.size:
+        return {"median": None, "iqr": None, "n": 0}
+    q1, med, q3 = np.percentile(x, [25, 50, 75])
+    return {"median": float(med), "iqr": (float(q1), float(q3)), "n": int(x.size)}
+
+
+def analyse(runs: dict[str, tuple[list[dict], list[dict]]]) -> dict:
+    """``runs``: variant -> (OOD records, ID records). Everything the report prints."""
+    out = {"variants": {}, "vo_vs_vt": {}}
+    for variant, (ood, id_records) in runs.items():
+        twins = id_twins(ood, id_records)
+        tasks = {(r["suite"], r["task_id"]) for r in ood}  # a run in progress: its tasks so far
+        id_records = [r for r in id_records if (r["suite"], r["task_id"]) in tasks]
+        by_condition = defaultdict(list)
+        for r in ood:
+            by_condition[r["condition"]].append(r)
+        stiffness = {}
+        for scale, condition in STIFFNESS.items():
+            sel = twins if condition == "id" else by_condition.get(condition, [])
+            if sel:
+                s = summarize(sel)
+                stiffness[scale] = {"episodes": s["episodes"], "tsr": s["tsr"], "dsr": s["dsr"], "r_max": r_max_stats(sel)}
+        out["variants"][variant] = {
+            "pooled": summarize(ood), "id": summarize(id_records) if id_records else None,
+            "id_twins": summarize(twins) if twins else None,
+            "paired_tsr": against_twins(ood, twins, "success"), "paired_dsr": against_twins(ood, twins, "dsr_success"),
+            "per_condition": {c: summarize(by_condition[c]) for c in OOD_CONDITIONS if by_condition.get(c)},
+            "stiffness": stiffness,
+        }
+    names = list(runs)
+    vo = [v for v in names if paper_key(v).startswith("vo")]
+    vt = [v for v in names if paper_key(v).startswith("vt")]
+    for a in vo:
+        for b in vt:
+            oa, ob = runs[a][0], runs[b][0]
+            per = {}
+            for c in OOD_CONDITIONS:
+                ca, cb = [r for r in oa if r["condition"] == c], [r for r in ob if r["condition"] == c]
+                if ca and cb:
+                    per[c] = {"tsr": paired_comparison(cb, ca, "success"), "dsr": paired_comparison(cb, ca, "dsr_success")}
+            out["vo_vs_vt"][f"{b} vs {a}"] = {"pooled_tsr": paired_comparison(ob, oa, "success"),
+                                             "pooled_dsr": paired_comparison(ob, oa, "dsr_success"), "per_condition": per}
+    return out
+
+
+def _points(x: float) -> str:
+    return f"{100 * x:+.1f}"
+
+
+def _iqr(stats: dict) -> str:
+    if stats["median"] is None:
+        return "-"
+    return f"{stats['median']:.2f} [{stats['iqr'][0]:.2f}, {stats['iqr'][1]:.2f}]"
+
+
+def build(result: dict) -> str:
+    lines = ["# OOD protocol on Object-Soft (the paper's Finding 4)", "",
+             "Nine held-out single-factor conditions x 10 tasks x 10 episodes = 900 per variant, each from an ID "
+             "episode's initial state. Changes against ID: the paper's Delta is against its full ID entry (here all "
+             "50 ID episodes of each task the OOD records hold, 500 when complete); *paired* is against the ID twins "
+             "(the same seeds, 100 episodes when complete), exact McNemar.", "",
+             "## Pooled over the nine conditions", "",
+             "| variant | OOD episodes | TSR % [95% CI] | DSR % [95% CI] | TSR - DSR | TSR vs ID | DSR vs ID "
+             "| TSR vs ID twins, paired (p) | DSR vs ID twins, paired (p) | paper DP TSR (Delta) / DSR (Delta) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for v, r in result["variants"].items():
+        p, i = r["pooled"], r["id"]
+        paper = PAPER_DP_POOLED.get(paper_key(v))
+        paper_txt = f"{paper[0]} ({paper[1]:+}) / {paper[2]} ({paper[3]:+})" if paper else "-"
+        lines.append(
+            f"| {v} | {p['episodes']} | {percent_ci(p['tsr'], p['tsr_ci95'])} | {percent_ci(p['dsr'], p['dsr_ci95'])} | "
+            f"{percent(p['gap'])} | {_points(p['tsr'] - i['tsr']) if i else '-'} | {_points(p['dsr'] - i['dsr']) if i else '-'} | "
+            f"{_points(r['paired_tsr']['difference'])} ({r['paired_tsr']['p_value']:.2g}) | "
+            f"{_points(r['paired_dsr']['difference'])} ({r['paired_dsr']['p_value']:.2g}) | {paper_txt} |")
+    lines += ["", "## Per condition (TSR / DSR %, episodes), beside the paper's Diffusion Policy", ""]
+    variants = list(result["variants"])
+    lines.append("| condition | " + " | ".join(f"{v}" for v in variants) + " | " +
+                 " | ".join(f"paper DP {paper_key(v)}" for v in variants) + " |")
+    lines.append("|---" * (1 + 2 * len(variants)) + "|")
+    for c in OOD_CONDITIONS:
+        cells = []
+        for v in variants:
+            s = result["variants"][v]["per_condition"].get(c)
+            cells.append(f"{percent(s['tsr'], 0)} / {percent(s['dsr'], 0)} ({s['episodes']})" if s else "-")
+        papers = [("{} / {}".format(*PAPER_DP_OBJECT_SOFT[paper_key(v)][c]) if paper_key(v) in PAPER_DP_OBJECT_SOFT
+                   else "-") for v in variants]
+        lines.append(f"| {c} | " + " | ".join(cells) + " | " + " | ".join(papers) + " |")
+    lines += ["", "## Under stiffness shift (the paper's stiffness table; x1.0 is the ID twins)", "",
+              "| E scale | variant | TSR % | DSR % | R_max median [IQR] | N | paper DP: TSR / DSR / R_max median [IQR] |",
+              "|---|---|---|---|---|---|---|"]
+    for scale in sorted(STIFFNESS):
+        for v in variants:
+            s = result["variants"][v]["stiffness"].get(scale)
+            if not s:
+                continue
+            paper = PAPER_DP_STIFFNESS.get(paper_key(v), {}).get(scale)
+            paper_txt = (f"{paper[0]} / {paper[1]} / {paper[2]:.2f} [{paper[3][0]:.2f}, {paper[3][1]:.2f}]"
+                         if paper else "-")
+            lines.append(f"| x{scale:g} | {v} | {percent(s['tsr'], 0)} | {percent(s['dsr'], 0)} | {_iqr(s['r_max'])} | "
+                         f"{s['episodes']} | {paper_txt} |")
+    if result["vo_vs_vt"]:
+        lines += ["", "## Touch under shift: VT against VO on the same episodes (paired, exact McNemar)", "",
+                  "| comparison | condition | pairs | TSR, VT - VO (p) | DSR, VT - VO (p) |", "|---|---|---|---|---|"]
+        for name, comp in result["vo_vs_vt"].items():
+            rows = [("pooled", comp["pooled_tsr"], comp["pooled_dsr"])]
+            rows += [(c, x["tsr"], x["dsr"]) for c, x in comp["per_condition"].items()]
+            for c, t, d in rows:
+                lines.append(f"| {name} | {c} | {t['pairs']} | {_points(t['difference'])} ({t['p_value']:.2g}) | "
+                             f"{_points(d['difference'])} ({d['p_value']:.2g}) |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path) -> None:
+    """TSR and DSR against each factor's value, one line per variant, the ID twins at nominal."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..tasks.suites import PhysicalFactors
+
+    factors = defaultdict(list)
+    for name, (key, value) in OOD_CONDITIONS.items():
+        factors[key].append((value, name))
+    nominal = PhysicalFactors()
+    fig, axes = plt.subplots(2, len(factors), figsize=(4.2 * len(factors), 6), squeeze=False, sharey=True)
+    for col, (key, pts) in enumerate(factors.items()):
+        for j, (variant, (ood, id_records)) in enumerate(runs.items()):
+            twins = id_twins(ood, id_records)
+            xs, tsr, dsr = [], [], []
+            for value, name in sorted(pts + [(getattr(nominal, key), "id")]):
+                sel = twins if name == "id" else [r for r in ood if r["condition"] == name]
+                if sel:
+                    s = summarize(sel)
+                    xs.append(value)
+                    tsr.append(100 * s["tsr"])
+                    dsr.append(100 * s["dsr"])
+            axes[0][col].plot(xs, tsr, "o-", color=f"C{j}", label=variant)
+            axes[1][col].plot(xs, dsr, "s--", color=f"C{j}", label=variant)
+        axes[0][col].set_title(f"TSR against {key}", fontsize=9)
+        axes[1][col].set_title(f"DSR against {key}", fontsize=9)
+        axes[1][col].set_xlabel(key)
+        for row in (0, 1):
+            axes[row][col].set_ylim(-5, 105)
+            axes[row][col].set_ylabel("%")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("ood", nargs="+", type=Path, help="OOD records files (<suite>_ood_<policy>.jsonl)")
+    ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    args = ap.parse_args(argv)
+    runs = {}
+    for path in args.ood:
+        if not path.is_file():
+            ap.error(f"{path} does not exist")
+        if "_ood_" not in path.name:
+            ap.error(f"{path}: not an OOD records file (<suite>_ood_<policy>.jsonl)")
+        ood = read_records(path)
+        if not ood:
+            ap.error(f"{path} holds no records")
+        keys = [episode_key(r) for r in ood]
+        if len(set(keys)) < len(keys):
+            ap.error(f"{path}: an episode appears twice; keep one record of each")
+        id_path = path.with_name(path.name.replace("_ood_", "_id_"))
+        if not id_path.is_file():
+            ap.error(f"{path}: its ID records {id_path} are missing; evaluate the policy on the ID protocol first")
+        runs[variant_of(ood[0])] = (ood, read_records(id_path))
+    result = analyse(runs)
+    text = build(result)
+    atomic_write(args.out / "ood.md", lambda p: p.write_text(text))
+    atomic_write_json(args.out / "ood.json", result)
+    plot_curves(runs, args.out / "ood_curves.png")
+    print(text)
+    return result
+
+
+if __name__ == "__main__":
+    main()
