@@ -8,10 +8,12 @@ import mani_skill_softvt  # noqa: F401
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.expert.pick_place import PHASE_STEPS, expert_actions, plan_pick_place
 from mani_skill_softvt.tasks.robot import mid_height_grasp
-from mani_skill_softvt.expert.planner import (MotionPlanner, PlanningError, box_obstacle, held_object, plan_expert_path,
-                                              scene_obstacles)
+from mani_skill_softvt.expert.planner import (MPLIB_PLANS, MPLIB_UNAVAILABLE, MotionPlanner, PlanningError, box_obstacle,
+                                              held_object, plan_expert_path, scene_obstacles)
 from mani_skill_softvt.physics.transforms import down_quat, quat_angle, quat_to_rotvec
 from mani_skill_softvt.tasks import constants as C
+
+pytestmark = pytest.mark.skipif(not MPLIB_PLANS, reason=MPLIB_UNAVAILABLE)
 
 
 @pytest.fixture(scope="module")

@@ -50,6 +50,15 @@ class PlanningError(RuntimeError):
     """No collision-free joint path reaches the requested TCP pose."""
 
 
+# mplib 0.1.1, the version ManiSkill 3.0.1 pins, dies with SIGSEGV building its planner under NumPy 2
+# (the LeRobot stack, docs/install.md). Refusing it there turns a crash of the whole process into a
+# PlanningError: the expert then takes its Cartesian plan (its receipt says so), and strict callers
+# get the reason.
+MPLIB_PLANS = int(np.__version__.split(".")[0]) < 2
+MPLIB_UNAVAILABLE = (f"mplib 0.1.1 (pinned by ManiSkill 3.0.1) crashes planning under NumPy {np.__version__}: its "
+                     "motion plans need the default stack (scripts/setup.sh, NumPy 1.26)")
+
+
 @dataclass
 class Obstacle:
     """A convex collision body of the planning scene, vertices in the world frame."""
@@ -125,6 +134,8 @@ class MotionPlanner:
 
     def __init__(self, env, joint_vel_limit: float = JOINT_VEL_LIMIT, joint_acc_limit: float = JOINT_ACC_LIMIT,
                  rrt_tries: int = RRT_TRIES):
+        if not MPLIB_PLANS:
+            raise PlanningError(MPLIB_UNAVAILABLE)
         import mplib
 
         self.rrt_tries = int(rrt_tries)
