@@ -1,0 +1,61 @@
+"""The OOD study (baselines/ood.py) on synthetic records: ID twins, paired changes, the stiffness table."""
+
+import json
+
+import pytest
+
+from mani_skill_softvt.baselines import ood as O
+from mani_skill_softvt.data.seeds import id_seed
+from mani_skill_softvt.evaluation.runner import record_hash
+from mani_skill_softvt.tasks.suites import OOD_CONDITIONS
+
+
+def _rec(task, i, condition, success, r_max, variant="vo-c,cpu"):
+    rec = {"suite": "object_soft", "task_id": task, "condition": condition, "seed": id_seed(task, i),
+           "policy": f"baselines/policies/{variant.split(',')[0]}-cpu.pt", "success": success,
+           "dsr_success": success and r_max <= 1.0, "r_max": r_max, "termination": "success" if success else "timeout",
+           "collapsed_steps": 0, "receipt": {"policy": f"diffusion_policy[{variant}]"}}
+    rec["record_sha256"] = record_hash(rec)
+    return rec
+
+
+def test_ood_is_read_against_its_id_twins_paired_and_by_stiffness():
+    # ID: 50 episodes of task 0, all successes within tolerance at R_max 0.5 (seeds 0-9 are the twins).
+    id_records = [_rec(0, i, "id", True, 0.5) for i in range(50)]
+    # OOD: softening (E x0.5) keeps every success but squeezes past tolerance; dim light fails 6 of 10.
+    ood = [_rec(0, i, "youngs_modulus_x0.5", True, 1.6) for i in range(10)]
+    ood += [_rec(0, i, "light_67.5", i >= 6, 0.4) for i in range(10)]
+    result = O.analyse({"vo-c,cpu": (ood, id_records)})
+    v = result["variants"]["vo-c,cpu"]
+    assert v["id_twins"]["episodes"] == 10 and v["id"]["episodes"] == 50
+    assert v["pooled"]["tsr"] == pytest.approx(14 / 20) and v["pooled"]["dsr"] == pytest.approx(4 / 20)
+    # Paired on the twins: 6 OOD episodes lost the success the ID twin had, none the other way.
+    assert (v["paired_tsr"]["only_a"], v["paired_tsr"]["only_b"], v["paired_tsr"]["pairs"]) == (0, 6, 20)
+    assert v["paired_tsr"]["difference"] == pytest.approx(-0.3)
+    assert v["paired_dsr"]["only_b"] == 16 and v["paired_dsr"]["p_value"] < 1e-4
+    # Stiffness: x1.0 is the twins, x0.5 the softened episodes; no x0.8 / x2.0 ran.
+    assert set(v["stiffness"]) == {0.5, 1.0}
+    assert v["stiffness"][1.0]["r_max"]["median"] == pytest.approx(0.5) and v["stiffness"][1.0]["episodes"] == 10
+    assert v["stiffness"][0.5]["tsr"] == 1.0 and v["stiffness"][0.5]["dsr"] == 0.0
+    text = O.build(result)
+    assert "| youngs_modulus_x0.5 | 100 / 0 (10) | 33 / 32 |" in text  # ours beside the paper's DP
+    assert "| x0.5 | vo-c,cpu | 100 | 0 | 1.60 [1.60, 1.60] | 10 | 33 / 32 / 0.66 [0.06, 0.76] |" in text
+
+
+def test_vt_against_vo_on_the_same_episodes(tmp_path):
+    id_vo = [_rec(0, i, "id", True, 0.5) for i in range(10)]
+    id_vt = [_rec(0, i, "id", True, 0.5, "vt-c,cpu,rgb+depth") for i in range(10)]
+    vo = [_rec(0, i, "mass_x2.5", i < 5, 0.5) for i in range(10)]
+    vt = [_rec(0, i, "mass_x2.5", True, 0.5, "vt-c,cpu,rgb+depth") for i in range(10)]
+    result = O.analyse({"vo-c,cpu": (vo, id_vo), "vt-c,cpu,rgb+depth": (vt, id_vt)})
+    comp = result["vo_vs_vt"]["vt-c,cpu,rgb+depth vs vo-c,cpu"]
+    assert comp["pooled_tsr"]["difference"] == pytest.approx(0.5) and comp["pooled_tsr"]["only_a"] == 5
+    assert set(comp["per_condition"]) == {"mass_x2.5"}
+    # The command reads each OOD file with its ID file and writes the report, JSON and curves.
+    for name, records in (("object_soft_ood_vo-c-cpu", vo), ("object_soft_id_vo-c-cpu", id_vo)):
+        (tmp_path / f"{name}.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    O.main([str(tmp_path / "object_soft_ood_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out")])
+    assert (tmp_path / "out" / "ood.md").exists() and (tmp_path / "out" / "ood_curves.png").stat().st_size > 0
+    with pytest.raises(SystemExit):
+        O.main([str(tmp_path / "object_soft_id_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out")])  # not an OOD file
+    assert len(O.PAPER_DP_OBJECT_SOFT["vo-c"]) == len(OOD_CONDITIONS)
