@@ -14,9 +14,18 @@ import mani_skill_softvt
 PACKAGE = Path(mani_skill_softvt.__file__).parent
 
 
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
 def imported_modules(path: Path) -> set[str]:
     """Every module ``path`` imports, anywhere in the file (lazy imports included), as absolute
-    names (``mani_skill_softvt.physics.fem``, ``warp``)."""
+    names (``mani_skill_softvt.physics.fem``, ``warp``). ``from . import x`` imports the module
+    ``x``, not its package's ``__init__``."""
     rel = path.relative_to(PACKAGE.parent).with_suffix("")
     package = list(rel.parts[:-1])
     out = set()
@@ -26,9 +35,8 @@ def imported_modules(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = package[:len(package) - node.level + 1] if node.level else []
             mod = ".".join(base + ([node.module] if node.module else []))
-            out.add(mod)
-            # "from . import fingers" imports a module too
-            out.update(f"{mod}.{a.name}" for a in node.names)
+            names = {f"{mod}.{a.name}" for a in node.names}
+            out |= names if node.module is None and names <= set(MODULES) else {mod} | names
     return out
 
 
@@ -104,26 +112,9 @@ def test_data_keeps_file_formats_and_does_not_plan():
 
 
 def _module_graph() -> dict[str, set[str]]:
-    """Every package module -> the package modules it imports (lazy imports included).
-    ``from . import x`` imports the module ``x``, not the package's ``__init__``."""
-    names = {}
-    for path in PACKAGE.rglob("*.py"):
-        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
-        names[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    graph = {}
-    for name, path in names.items():
-        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
-        out = set()
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Import):
-                out.update(a.name for a in node.names)
-            elif isinstance(node, ast.ImportFrom):
-                base = package[:len(package) - node.level + 1] if node.level else []
-                mod = ".".join(base + ([node.module] if node.module else []))
-                subs = {f"{mod}.{a.name}" for a in node.names} & set(names)
-                out |= subs if subs and node.module is None else {mod} | subs
-        graph[name] = {m for m in out if m in names and m != name and m != "mani_skill_softvt"}
-    return graph
+    """Every package module -> the package modules it imports (lazy imports included)."""
+    return {name: {m for m in imported_modules(path) if m in MODULES and m not in (name, "mani_skill_softvt")}
+            for name, path in MODULES.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
