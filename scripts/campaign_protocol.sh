@@ -29,5 +29,5 @@ fi
 "$PY" -m mani_skill_softvt.evaluate --policy "baselines/policies/$NAME.pt" --tasks all --episodes-per-task 50 \
   --workers "$WORKERS" --out baselines/results
 shopt -s nullglob
-"$PY" -m mani_skill_softvt.baselines.report baselines/results/object_soft_id_*.jsonl \
+"$PY" -m mani_skill_softvt.studies.results baselines/results/object_soft_id_*.jsonl \
   --legacy baselines/results/old_physics/*.jsonl --out baselines/results

@@ -16,8 +16,8 @@ export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 PY=${PY:-.venv/bin/python}
 recipes=("$@")
 if (( ${#recipes[@]} == 0 )); then
-  mapfile -t recipes < <("$PY" -c "from mani_skill_softvt.baselines.search import RECIPES; print(*RECIPES, sep='\n')")
+  mapfile -t recipes < <("$PY" -c "from mani_skill_softvt.studies.recipe_search import RECIPES; print(*RECIPES, sep='\n')")
 fi
 read -r -a sets <<< "${SET:-}"
-"$PY" -m mani_skill_softvt.baselines.search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
+"$PY" -m mani_skill_softvt.studies.recipe_search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
   --demos "$SOFTVT_DEMOS_DIR" --runs "$SOFTVT_RUNS_DIR" --demos-per-task 90 --heldout 10 --set "${sets[@]}"

@@ -366,7 +366,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
 def test_action_errors_measure_distance_rotation_angle_and_closure():
     from scipy.spatial.transform import Rotation
 
-    from mani_skill_softvt.baselines.openloop import action_errors
+    from mani_skill_softvt.studies.openloop import action_errors
 
     target = np.r_[0.5, 0.0, 0.2, down_rotvec(0.3), 0.4][None]
     pred = target.copy()
@@ -386,8 +386,8 @@ def test_action_errors_measure_distance_rotation_angle_and_closure():
 
 
 def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tmp_path):
-    from mani_skill_softvt.baselines.openloop import main as openloop_main
-    from mani_skill_softvt.baselines.openloop import replan_indices
+    from mani_skill_softvt.studies.openloop import main as openloop_main
+    from mani_skill_softvt.studies.openloop import replan_indices
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     cfg = make_config("vo-c", **{**TINY, "heldout_per_task": 1})
@@ -423,7 +423,7 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
 
 
 def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(tmp_path, monkeypatch, capsys):
-    from mani_skill_softvt.baselines import search
+    from mani_skill_softvt.studies import recipe_search as search
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
@@ -577,7 +577,7 @@ def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_the_recipe_search_scores_snapshots_in_closed_loop_and_resumes(tmp_path, monkeypatch):
-    from mani_skill_softvt.baselines import search
+    from mani_skill_softvt.studies import recipe_search as search
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
@@ -623,7 +623,7 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
 
 
 def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
-    from mani_skill_softvt.baselines import report
+    from mani_skill_softvt.studies import results as report
     from mani_skill_softvt.evaluation.runner import record_hash
 
     def rec(variant, seed, success, r_max, policy="x.pt", sha="a" * 64):
@@ -729,7 +729,7 @@ def test_inference_fields_do_not_change_training(tmp_path):
 
 
 def test_closure_summary_tells_one_held_closure_from_a_ratchet():
-    from mani_skill_softvt.baselines.closure import closure_summary, held_chunks
+    from mani_skill_softvt.studies.closure import closure_summary, held_chunks
 
     k = 8
     # The expert: one closure for the whole hold. The object is held from the closing chunk's
@@ -761,7 +761,7 @@ def test_closure_summary_tells_one_held_closure_from_a_ratchet():
     (["{committed}", "{committed}"], "two policies are named"),
 ])
 def test_closure_refuses_bad_input_before_running_anything(tmp_path, capsys, args, message):
-    from mani_skill_softvt.baselines import closure
+    from mani_skill_softvt.studies import closure
 
     policy = tmp_path / "p.pt"
     policy.write_bytes(b"")  # never read: the range checks come before the policy file is needed

@@ -1,10 +1,10 @@
-"""The OOD study (baselines/ood.py) on synthetic records: ID twins, paired changes, the stiffness table."""
+"""The OOD study (studies/ood_results.py) on synthetic records: ID twins, paired changes, the stiffness table."""
 
 import json
 
 import pytest
 
-from mani_skill_softvt.baselines import ood as O
+from mani_skill_softvt.studies import ood_results as O
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.runner import record_hash
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS

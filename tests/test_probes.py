@@ -1,8 +1,8 @@
-"""The touch probes' maths (baselines/probes.py): labels, ridge regression, scores."""
+"""The touch probes' maths (studies/touch_probes.py): labels, ridge regression, scores."""
 
 import numpy as np
 
-from mani_skill_softvt.baselines.probes import (
+from mani_skill_softvt.studies.touch_probes import (
     RidgeSolver,
     balanced_accuracy,
     r2,

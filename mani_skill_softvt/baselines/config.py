@@ -149,7 +149,7 @@ class DPConfig:
         return dataclasses.asdict(self)
 
 
-# The recipe search's recipes (baselines/search.py, train --recipe): each varies one thing of the
+# The recipe search's recipes (studies/recipe_search.py, train --recipe): each varies one thing of the
 # cpu preset (3,000 steps of batch 32 in bf16, 84 px cameras, ResNet widths 16-128, U-Net
 # 64-256, 5 % shift, two observation frames, 8 of 16 actions executed).
 RECIPES: dict[str, dict] = {

@@ -1,6 +1,6 @@
 """The baselines' results beside the paper's: TSR, DSR, TSR - DSR and its share of successes.
 
-    python -m mani_skill_softvt.baselines.report baselines/results/object_soft_id_*.jsonl \
+    python -m mani_skill_softvt.studies.results baselines/results/object_soft_id_*.jsonl \
         --legacy baselines/results/old_physics/*.jsonl
 
 Reads evaluation records (each verified against its hash), groups them by the policy's name in
@@ -207,7 +207,7 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.report", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.results", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("records", nargs="*", type=Path, help="evaluation record files (JSONL)")
     ap.add_argument("--legacy", nargs="*", type=Path, default=[],

@@ -1,6 +1,6 @@
 """How trained policies close the gripper over an episode, beside the expert's closure for the same seed.
 
-    python -m mani_skill_softvt.baselines.closure baselines/policies/vo-c-cpu.pt \
+    python -m mani_skill_softvt.studies.closure baselines/policies/vo-c-cpu.pt \
         baselines/policies/vt-c-cpu.pt --task 3 --episodes 6 --out baselines/results
 
 The scripted expert draws one closure per episode, uniform in the object's calibrated envelope
@@ -73,7 +73,7 @@ def _run(run, episodes: list[dict], queue) -> list[dict]:
     from ..evaluation.runner import run_episode
     from ..evaluation.wrapper import make_env
     from ..expert.pick_place import draw_closure
-    from .agent import GRIPPER
+    from ..baselines.agent import GRIPPER
 
     policy = run.policy.load()
     env = make_env(episodes[0]["suite"], episodes[0]["task_id"], obs_mode=run.obs_mode, control_mode=run.control_mode,

@@ -2,7 +2,7 @@
 force, the deformation ratio R_t and slip from the tactile stream alone, the wrist camera alone,
 and both, scored on held-out demos.
 
-    python -m mani_skill_softvt.baselines.probes --demos /root/softvt-demos --camera-size 84x84
+    python -m mani_skill_softvt.studies.touch_probes --demos /root/softvt-demos --camera-size 84x84
 
 Per frame of a demo (the observation after each step):
 
@@ -304,7 +304,7 @@ def main(argv=None) -> dict:
     from ..observations import parse_image_size
     from ..tasks.suites import NUM_TASKS
 
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.probes", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.touch_probes", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR)
     ap.add_argument("--suite", default="object_soft")

@@ -1,6 +1,6 @@
 """The OOD protocol's results beside the paper's (Finding 4): pooled, per condition, under stiffness shift.
 
-    python -m mani_skill_softvt.baselines.ood baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
+    python -m mani_skill_softvt.studies.ood_results baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
         baselines/results/object_soft_ood_vt-c-cpu.jsonl --out baselines/results
 
 Each OOD records file is read with its policy's ID records (the same directory's
@@ -33,7 +33,7 @@ from ..evaluation.protocols import episode_key
 from ..evaluation.runner import read_records
 from ..fileio import atomic_write, atomic_write_json
 from ..tasks.suites import OOD_CONDITIONS
-from .report import variant_of
+from .results import variant_of
 
 # The paper's per-condition OOD table for Diffusion Policy on Object-Soft (TSR, DSR %; 100 episodes each),
 # and its pooled OOD row with the change against its ID entry.

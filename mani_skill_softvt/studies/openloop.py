@@ -1,6 +1,6 @@
 """Open-loop error of a trained baseline on held-out demonstrations: the recipe search's cheap measure.
 
-    python -m mani_skill_softvt.baselines.openloop outputs/baselines/object_soft/vo-c-cpu/policy.pt
+    python -m mani_skill_softvt.studies.openloop outputs/baselines/object_soft/vo-c-cpu/policy.pt
 
 A run trained with ``--set heldout_per_task=N`` never saw the last N demos of each task. At every
 step where the agent would replan (every ``action_steps`` steps of an episode), the policy
@@ -23,8 +23,8 @@ from tqdm import tqdm
 
 from ..fileio import atomic_write_json
 from ..paths import DEMOS_DIR
-from .agent import GRIPPER, executed_actions
-from .dataset import DemoWindows, load_windows
+from ..baselines.agent import GRIPPER, executed_actions
+from ..baselines.dataset import DemoWindows, load_windows
 
 
 def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
@@ -54,7 +54,7 @@ def chunk_errors(model, windows: DemoWindows, indices: np.ndarray, seed: int = 0
     """:func:`action_errors` of the actions the agent would execute (the first ``action_steps`` of
     each chunk the model denoises at ``indices``, its gripper column as the agent sends it) against
     the demonstrated ones; arrays (len(indices), action_steps)."""
-    from .model import noise_scheduler
+    from ..baselines.model import noise_scheduler
 
     cfg = model.cfg
     scheduler = noise_scheduler(cfg, inference=True)
@@ -87,7 +87,7 @@ def run_dir_of(policy_path: Path) -> Path:
 def load_run_windows(cfg, run: Path, demos_root: Path, cache: Path | None = None) -> tuple[DemoWindows, DemoWindows]:
     """The held-out and training windows of the run in ``run``, through the data cache ``cache``
     (default: the run's own, ``<run>/data_cache``)."""
-    from .train import CACHE
+    from ..baselines.train import CACHE
 
     cache = Path(run) / CACHE if cache is None else cache
     return load_windows(cfg, demos_root, cache, heldout=True), load_windows(cfg, demos_root, cache)
@@ -99,7 +99,7 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
     """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
     docstring); ``write`` puts them in ``openloop.json`` beside it. ``windows``: the run's
     (held-out, training) windows when the caller has them (several snapshots of one run)."""
-    from .agent import load_policy_file
+    from ..baselines.agent import load_policy_file
 
     policy_path = Path(policy_path)
     cfg, model, ckpt = load_policy_file(policy_path)
@@ -138,7 +138,7 @@ def format_openloop(result: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.openloop", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.openloop", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("policy", type=Path, help="a policy.pt of a run trained with heldout_per_task > 0")
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")

@@ -1,10 +1,10 @@
 """The recipe search of the CPU baselines (campaign step 2): named recipes, trained on the same
 demos with held-out demos set aside, ranked by their held-out open-loop error.
 
-    python -m mani_skill_softvt.baselines.search --variant vo-c --recipes base long --budget-min 120
-    python -m mani_skill_softvt.baselines.search --variant vo-c --recipes long --set batch_size=64
-    python -m mani_skill_softvt.baselines.search --variant vo-c --recipes long --closed-loop 10 --steps 6000 12000
-    python -m mani_skill_softvt.baselines.search --variant vo-c --table       # the results so far
+    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes base long --budget-min 120
+    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes long --set batch_size=64
+    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes long --closed-loop 10 --steps 6000 12000
+    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --table       # the results so far
 
 A recipe is a set of :class:`~mani_skill_softvt.baselines.config.DPConfig` overrides on the cpu
 preset (:data:`~.config.RECIPES`), plus any ``--set key=value`` (the run is then named
@@ -37,7 +37,7 @@ from pathlib import Path
 from ..evaluation.metrics import percent_ci
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import DEMOS_DIR, REPO_DIR
-from .config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
+from ..baselines.config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
@@ -100,7 +100,7 @@ def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Pat
                       threads: int, cache: Path | None = None) -> list[dict]:
     """Log the open-loop error of every snapshot of the run of ``cfg`` in ``run`` not yet logged;
     the new lines. The run's data is read once for all its snapshots."""
-    from .agent import read_policy_file
+    from ..baselines.agent import read_policy_file
     from .openloop import load_run_windows, openloop
 
     done = measured(variant, results_dir)
@@ -127,8 +127,8 @@ def derive_snapshots(source: Path, run: Path, cfg) -> int:
     ``cfg`` only in :data:`~.config.INFERENCE_FIELDS`: the same weights, sampled as ``cfg`` says.
     Training it would give those weights bit for bit; this costs seconds. Returns how many files
     were written (those already there are kept)."""
-    from .agent import read_policy_file
-    from .train import POLICY, save, snapshot_path
+    from ..baselines.agent import read_policy_file
+    from ..baselines.train import POLICY, save, snapshot_path
 
     snaps = run_snapshots(source)
     if snaps and training_identity(read_policy_file(snaps[0])[0]) != training_identity(cfg):
@@ -158,7 +158,7 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
 
     from ..evaluation.run import RunConfig
     from ..evaluation.runner import evaluate
-    from .agent import resolve_policy_file
+    from ..baselines.agent import resolve_policy_file
 
     every = run_snapshots(run)
     if not every:
@@ -260,9 +260,9 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
 
 
 def main(argv=None) -> str:
-    from .train import train
+    from ..baselines.train import train
 
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.search", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.recipe_search", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", default="vo-c", choices=VARIANTS)
     ap.add_argument("--recipes", nargs="+", default=["base"], help=f"of {sorted(RECIPES)}, trained in this order")

@@ -1,0 +1,12 @@
+"""The campaign's studies of the baselines, each named for what it shows (docs/baselines.md).
+
+The library a user imports to train and run a baseline is :mod:`mani_skill_softvt.baselines`;
+these read its policies, records and demos and write the campaign's reports:
+
+- :mod:`.results`: the variants' ID results beside the paper's, paired comparisons, success traces;
+- :mod:`.ood_results`: the OOD protocol's results beside the paper's (pooled, per condition, stiffness);
+- :mod:`.closure`: a policy's commanded gripper closure over its episodes, beside the expert's draw;
+- :mod:`.touch_probes`: what the tactile and camera streams carry of force and deformation (linear probes);
+- :mod:`.recipe_search`: the training recipes ranked by open-loop error, then closed loop;
+- :mod:`.openloop`: a trained policy's held-out open-loop action error.
+"""
