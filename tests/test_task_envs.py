@@ -400,3 +400,17 @@ def test_an_episode_is_the_same_bits_in_a_fresh_env_and_after_other_episodes():
     finally:
         for e in envs:
             e.close()
+
+
+def test_a_malformed_action_is_refused_before_the_simulation_sees_it():
+    import torch
+
+    from mani_skill_softvt.tasks.robot import validate_action
+
+    for bad, message in ((np.full(7, np.nan), "NaN or inf"), (["x"] * 7, "must be numbers"),
+                         (np.zeros(6), "shape \\(6,\\), expected \\(7,\\) for control mode 'pd_ee_pose'")):
+        with pytest.raises(ValueError, match=message):
+            validate_action(bad, (7,), "pd_ee_pose")
+    assert validate_action([0.1] * 7, (7,), "pd_ee_pose").dtype == np.float32  # a sequence becomes an array
+    t = torch.zeros(1, 7)
+    assert validate_action(t, (7,), "pd_ee_pose") is t and validate_action(None, (7,), "pd_ee_pose") is None

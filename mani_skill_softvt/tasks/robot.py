@@ -35,6 +35,7 @@ from gymnasium import spaces
 from mani_skill.agents.controllers import (PDEEPoseController, PDEEPoseControllerConfig, PDJointPosMimicController,
                                            PDJointPosMimicControllerConfig)
 from mani_skill.agents.registration import register_agent
+from mani_skill.utils.common import to_numpy
 from mani_skill.agents.robots.panda.panda import Panda
 from mani_skill.utils.geometry.rotation_conversions import axis_angle_to_quaternion
 from mani_skill.utils.structs.pose import Pose
@@ -67,6 +68,24 @@ def base_frame_pose(tcp_pose_world: np.ndarray, rotvec_reference: np.ndarray | N
         raise NotImplementedError(f"the base-frame pose assumes an unrotated robot base, got {C.ROBOT_BASE_POSE}")
     pose = np.asarray(tcp_pose_world, np.float64).reshape(7)
     return np.concatenate([pose[:3] - C.ROBOT_BASE_POSE[:3], quat_to_rotvec(pose[3:7], reference=rotvec_reference)])
+
+
+def validate_action(action, shape: tuple[int, ...], control_mode: str):
+    """Reject a malformed action before anything in the simulation changes; return it as ManiSkill
+    takes it (arrays and tensors unchanged, sequences of numbers as float32 arrays). ``shape``:
+    the control mode's action shape (unbatched)."""
+    if action is None or isinstance(action, dict):
+        return action
+    a = np.asarray(to_numpy(action))
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"action must be numbers (7 floats: [x, y, z] position, [rx, ry, rz] axis-angle, "
+                         f"gripper), got {type(action).__name__} of dtype {a.dtype}")
+    if a.shape not in (tuple(shape), (1, *shape)):
+        raise ValueError(f"action has shape {a.shape}, expected {tuple(shape)} for control mode '{control_mode}' "
+                         "([x, y, z] position, [rx, ry, rz] axis-angle, gripper)")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action contains NaN or inf: {a.ravel().tolist()}")
+    return action if isinstance(action, (np.ndarray, torch.Tensor)) else a.astype(np.float32)
 
 
 def mid_height_grasp(nodes: np.ndarray) -> float:

@@ -48,7 +48,7 @@ from ..tactile.sensor import world_to_pad
 from . import constants as C
 from . import fingers
 from .objects import ObjectSpec, PropCollider, SceneObjects, build_objects  # noqa: F401  (specs: the tasks' API)
-from .robot import PandaSoftVT  # noqa: F401  (registers the agent)
+from .robot import PandaSoftVT, validate_action  # noqa: F401  (PandaSoftVT: registers the agent)
 from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
 
 # Reset options: the episode's physical factors, and ManiSkill's own.
@@ -293,23 +293,8 @@ class SoftBodyEnv(BaseEnv):
         return super().reset(seed=seed, options=options)
 
     def validate_action(self, action):
-        """Reject malformed actions before anything in the simulation changes; return the action
-        as ManiSkill takes it (arrays and tensors unchanged, sequences of numbers as float32 arrays)."""
-        if action is None or isinstance(action, dict):
-            return action
-        a = np.asarray(to_numpy(action))
-        if a.dtype.kind not in "fiu":
-            raise ValueError(f"action must be numbers (7 floats: [x, y, z] position, [rx, ry, rz] axis-angle, "
-                             f"gripper), got {type(action).__name__} of dtype {a.dtype}")
-        shape = self.single_action_space.shape
-        if a.shape not in (shape, (1, *shape)):
-            raise ValueError(
-                f"action has shape {a.shape}, expected {shape} for control mode '{self.control_mode}' "
-                "([x, y, z] position, [rx, ry, rz] axis-angle, gripper)"
-            )
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action contains NaN or inf: {a.ravel().tolist()}")
-        return action if isinstance(action, (np.ndarray, torch.Tensor)) else a.astype(np.float32)
+        """:func:`~mani_skill_softvt.tasks.robot.validate_action` against this env's action space."""
+        return validate_action(action, self.single_action_space.shape, self.control_mode)
 
     def _before_simulation_step(self):
         self.objects.before_sim_step()
