@@ -14,20 +14,27 @@ from importlib import metadata
 from .version import __version__
 
 # The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
-# policy's network (torch), the array maths (numpy) and ManiSkill's env glue.
-STACK_DISTRIBUTIONS = ("torch", "numpy", "warp-lang", "newton", "sapien", "mani-skill")
+# policy's network and sampler (torch, diffusers), the array maths (numpy) and ManiSkill's env glue.
+STACK_DISTRIBUTIONS = ("torch", "numpy", "warp-lang", "newton", "sapien", "mani-skill", "diffusers")
 
 
 @lru_cache(maxsize=1)
-def software_stack() -> dict[str, str]:
-    """``{"python": ..., "mani-skill-softvt": ..., "torch": ..., ...}`` of this process."""
-    out = {"python": platform.python_version(), "mani-skill-softvt": __version__}
+def _stack() -> tuple[tuple[str, str | None], ...]:
+    import cv2  # the OpenCV that runs (two opencv distributions may be installed, and one wins)
+
+    out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__}
     for dist in STACK_DISTRIBUTIONS:
         try:
             out[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:
             out[dist] = None
-    return out
+    return tuple(out.items())
+
+
+def software_stack() -> dict[str, str | None]:
+    """``{"python": ..., "mani-skill-softvt": ..., "torch": ..., "opencv": ..., ...}`` of this process
+    (a new dict each call: records do not share one)."""
+    return dict(_stack())
 
 
 def stack_differences(recorded: dict | None, current: dict) -> list[str]:

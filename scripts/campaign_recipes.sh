@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Baselines campaign, step 2 (docs/baselines.md): the recipe search, resumable across sessions.
 #   bash scripts/campaign_recipes.sh [VARIANT=vo-c] [BUDGET_MIN=150] [RECIPE ...]
-# Trains the named recipes (mani_skill_softvt/baselines/search.py: RECIPES; default: all, in
+# Trains the named recipes (mani_skill_softvt/baselines/config.py: RECIPES, run by studies/recipe_search.py; default: all, in
 # order) on the step-1 demos (SOFTVT_DEMOS_DIR, default /root/softvt-demos, rendered at 84x84),
 # each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
 # spent; run again to continue. Runs (checkpoints, prepared data) stay beside the demos

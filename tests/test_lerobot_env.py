@@ -36,13 +36,18 @@ def test_env_ids_name_suites_and_keys_map_back_to_the_export():
 
 def test_seeds_name_protocol_episodes_and_a_bad_action_is_a_recorded_result(tmp_path):
     records = tmp_path / "softvt" / "records.jsonl"
+    # As lerobot-eval runs it with its default seed (1000) and --eval.n_episodes=3.
     env = LeRobotEnv("object_soft", 3, protocol="ood", condition="mass_x2.5", camera_size=(84, 84),
-                     image_size=(64, 64), records=records, policy_spec="lerobot:test")
+                     image_size=(64, 64), records=records, policy_spec="lerobot:test", first_seed=1000,
+                     recorded_episodes=3)
     assert env.task_description == task_spec("object_soft", 3).instruction
     assert env._max_episode_steps == 300
-    with pytest.raises(ValueError, match="seed 1000: .* 0 to 49 .* --seed=0"):
-        env.reset(seed=1000)  # lerobot-eval's default seed
-    obs, info = env.reset(seed=2)
+    with pytest.raises(ValueError, match="seed -1: .* seed >= 0"):
+        env.reset(seed=-1)
+    # Seed 1003 is LeRobot's batch padding past the 3 episodes it counts: it ends at once, unrecorded.
+    obs, info = env.reset(seed=1003)
+    assert env.step(np.zeros(7, np.float32))[2] and not records.exists()
+    obs, info = env.reset(seed=1002)  # the protocol's episode 1002 mod 50 = 2
     # The observation is the policy's streams only, each as its space says.
     assert set(obs) == POLICY_KEYS and env.observation_space.contains(obs), {k: np.shape(v) for k, v in obs.items()}
     assert obs["pixels"]["base_camera"].shape == (64, 64, 3) and obs["pixels"]["tactile_left"].dtype == np.uint8
@@ -51,6 +56,8 @@ def test_seeds_name_protocol_episodes_and_a_bad_action_is_a_recorded_result(tmp_
     obs2, reward, terminated, truncated, info = env.step(np.full(7, np.nan, np.float32))
     assert terminated and not truncated and info["termination"] == "policy_error" and not info["is_success"]
     assert env.step(np.zeros(7, np.float32))[2]
+    frame = env.render()  # the human-view camera's frame, as LeRobot's videos take it
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
     env.close()
     (rec,) = read_records(records)
     assert rec["termination"] == "policy_error" and "NaN" in rec["error"] and rec["steps"] == 0

@@ -11,10 +11,12 @@ task, and nothing of LeRobot is imported here (the plugin, ``lerobot_env_softvt`
   (:func:`~mani_skill_softvt.data.lerobot.frame_features`), so a policy trained on the export runs
   unchanged: the cameras and GelSight images as ``pixels``, proprioception as ``agent_pos``, the
   marker fields as ``tactile.<side>.<field>``. Nothing evaluator-only is among them.
-- **Seeds name protocol episodes**: ``reset(seed=i)`` starts episode ``i`` of the task under the
-  protocol (the ID protocol's i-th held-out initial state, or the OOD condition's), so
-  ``lerobot-eval --seed=0 --eval.n_episodes=N`` runs the protocol's first N episodes, the
-  episodes ``evaluate`` runs.
+- **Seeds name protocol episodes**: ``reset(seed=s)`` starts episode ``s mod 50`` of the task
+  under the protocol (the ID protocol's held-out initial states, or the OOD condition's from the
+  same states), so ``lerobot-eval --eval.n_episodes=N`` with its default seed (1000) or ``--seed=0``
+  runs the protocol's first N episodes, the episodes ``evaluate --episodes-per-task N`` runs.
+  LeRobot runs whole batches and drops the episodes past N: those (``recorded_episodes``) reset
+  and end at once, unrecorded.
 - **Scoring** is the evaluator's: every step's ``info`` holds ``is_success`` (task success, what
   ``lerobot-eval`` counts as its success rate, our TSR) and the DSR wrapper's R_t, R_max,
   collapsed tets and ``dsr_success``; when the episode ends, ``termination`` says how and the
@@ -35,7 +37,7 @@ import numpy as np
 from ..data.lerobot import FPS, frame_feature_shapes, frame_features
 from ..data.seeds import ID_EPISODES_PER_TASK
 from ..fileio import append_jsonl
-from ..observations import flatten_batch, info_bool
+from ..observations import flatten_batch, info_bool, unbatch
 from ..physics.fem import SimulationInstabilityError
 from ..rollout import episode_end
 from ..tasks.constants import MAX_EPISODE_STEPS
@@ -92,7 +94,8 @@ class LeRobotEnv(gym.Env):
     ``camera_size`` is what the cameras render at (the demos' ``render --camera-size``),
     ``image_size`` what every image is then resized to (the export's ``--image-size``; None: not
     resized). ``records``: the JSONL file each finished episode's record is appended to (None:
-    none kept).
+    none kept). ``first_seed`` / ``recorded_episodes``: the run's first seed and how many
+    episodes it counts (seeds past them are LeRobot's batch padding).
     ``policy_spec`` / ``policy_sha256`` name the policy in the records (LeRobot's pretrained path
     and the hash of its weights); the policy itself is never seen here.
     """
@@ -102,8 +105,8 @@ class LeRobotEnv(gym.Env):
     def __init__(self, suite: str = "object_soft", task_id: int = 0, protocol: str = "id",
                  condition: str | None = None, obs_mode: str = "rgb+tactile", control_mode: str = "pd_ee_pose",
                  camera_size: tuple[int, int] | None = None, image_size: tuple[int, int] | None = None,
-                 records: str | Path | None = None,
-                 policy_spec: str = "lerobot", policy_sha256: str | None = None, render_mode: str = "rgb_array"):
+                 records: str | Path | None = None, policy_spec: str = "lerobot", policy_sha256: str | None = None,
+                 first_seed: int = 0, recorded_episodes: int | None = None, render_mode: str = "rgb_array"):
         if protocol == "ood" and condition is None:
             raise ValueError("the OOD protocol runs one condition per env: give condition (e.g. 'mass_x2.5')")
         self.suite, self.task_id, self.protocol = suite, int(task_id), protocol
@@ -112,8 +115,11 @@ class LeRobotEnv(gym.Env):
                                   None if protocol == "id" else [condition])
         self.records = None if records is None else Path(records)
         self.policy_spec, self.policy_sha256 = policy_spec, policy_sha256
+        self.first_seed, self.recorded_episodes = int(first_seed), recorded_episodes
         self.render_mode = render_mode
-        self._make = dict(obs_mode=obs_mode, control_mode=control_mode, camera_size=camera_size)
+        # render_mode: LeRobot's videos are the human-view camera's frames (env.render()).
+        self._make = dict(obs_mode=obs_mode, control_mode=control_mode, camera_size=camera_size,
+                          render_mode=render_mode)
         self.image_size = None if image_size is None else tuple(image_size)
         self.observation_space = observation_space(obs_mode, camera_size, self.image_size)
         self.action_space = gym.spaces.Box(-np.inf, np.inf, (7,), np.float32)
@@ -137,18 +143,23 @@ class LeRobotEnv(gym.Env):
         return self.task_description
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        index = self._next_index if seed is None else int(seed)
-        if not 0 <= index < len(self._episodes):
-            raise ValueError(
-                f"seed {seed}: a SoftVT seed names the protocol's episode, 0 to {len(self._episodes) - 1} per task; "
-                f"run lerobot-eval with --seed=0 and --eval.n_episodes <= {len(self._episodes)}")
-        self._next_index = index + 1
-        self._episode = self._episodes[index]
+        if seed is None:  # no seeds given: the protocol's episodes in order
+            seed = self.first_seed + self._next_index
+        seed = int(seed)
+        if seed < 0:
+            raise ValueError(f"seed {seed}: SoftVT seeds name protocol episodes (seed mod {len(self._episodes)}); "
+                             "give lerobot-eval a seed >= 0 (its default, 1000, or 0 start at the first)")
+        self._next_index = seed - self.first_seed + 1
+        self._episode = self._episodes[seed % len(self._episodes)]
         opts = {} if self.condition == "id" else {"ood": self.condition}
         obs, info = self._sim().reset(seed=int(self._episode["seed"]), options=opts)
         self._steps, self._t0, self._ended = 0, time.perf_counter(), None
         self._obs = lerobot_observation(frame_features(flatten_batch(obs), self.image_size))
-        return self._obs, self._info(info)
+        info = self._info(info)
+        if self.recorded_episodes is not None and not 0 <= seed - self.first_seed < self.recorded_episodes:
+            # LeRobot's batch padding: it drops this episode, so it ends at once and leaves no record.
+            self._ended = {**info, "termination": "padding"}
+        return self._obs, info
 
     def step(self, action):
         if self._ended is not None:  # LeRobot may step a finished sub-env; it changes nothing
@@ -192,8 +203,8 @@ class LeRobotEnv(gym.Env):
         return self._obs, reward, termination != "timeout", termination == "timeout", self._ended
 
     def render(self):
-        pixels = self._obs.get("pixels", {})
-        return next(iter(pixels.values())) if pixels else None
+        """The human-view camera's frame (LeRobot's episode videos), uint8 (H, W, 3)."""
+        return np.asarray(unbatch(self._sim().render()), dtype=np.uint8)
 
     def close(self):
         if self.records is not None and self.records.exists():

@@ -125,29 +125,57 @@ class _ClassKind(PolicyKind):
         return policy
 
 
+_OWN_KINDS = (_RemoteKind(), _BuiltinKind())  # tried first: naming them loads no other package
+_CLASS_KIND = _ClassKind()  # tried last: any "a:b" would match it
+
+
 @lru_cache(maxsize=1)
-def policy_kinds() -> tuple[PolicyKind, ...]:
-    """Every kind, in the order a spec is tried: the registered ones, then remote, built-in, class."""
-    registered = [ep.load() for ep in sorted(metadata.entry_points(group=POLICY_KINDS_GROUP), key=lambda e: e.name)]
-    return (*registered, _RemoteKind(), _BuiltinKind(), _ClassKind())
+def _registered_kinds() -> tuple[tuple[str, PolicyKind | Exception], ...]:
+    """The kinds installed packages register, loaded once on first need (a kind that fails to
+    load is kept as its error, so it spoils only the specs that would have been its own)."""
+    out = []
+    for ep in sorted(metadata.entry_points(group=POLICY_KINDS_GROUP), key=lambda e: e.name):
+        try:
+            out.append((ep.name, ep.load()))
+        except Exception as e:  # noqa: BLE001 - another package's import error is reported, not raised here
+            out.append((ep.name, e))
+    return tuple(out)
 
 
 def policy_kind(name: str) -> PolicyKind:
-    for kind in policy_kinds():
+    """The kind called ``name`` (the package's own without loading any registered one)."""
+    for kind in (*_OWN_KINDS, _CLASS_KIND):
         if kind.name == name:
             return kind
-    raise ValueError(f"no policy kind '{name}' is installed (registered: {[k.name for k in policy_kinds()]})")
+    for kind_name, kind in _registered_kinds():
+        if kind_name == name or getattr(kind, "name", None) == name:
+            if isinstance(kind, Exception):
+                raise ValueError(f"the policy kind '{kind_name}' could not be loaded: {kind}")
+            return kind
+    raise ValueError(f"no policy kind '{name}' is installed "
+                     f"(registered: {[n for n, _ in _registered_kinds()]})")
 
 
 def resolve_policy(spec: str) -> PolicySource:
-    """The :class:`PolicySource` of ``spec``; ValueError naming the spec for one no kind takes."""
+    """The :class:`PolicySource` of ``spec``: tried on remote and built-in names, then the
+    registered kinds, then ``module:Class``; ValueError naming the spec for one no kind takes."""
     spec = str(spec)
-    for kind in policy_kinds():
+    for kind in _OWN_KINDS:
         if kind.matches(spec):
             return kind.resolve(spec)
+    broken = []
+    for name, kind in _registered_kinds():
+        if isinstance(kind, Exception):
+            broken.append(f"{name} ({type(kind).__name__}: {kind})")
+        elif kind.matches(spec):
+            return kind.resolve(spec)
+    if _CLASS_KIND.matches(spec):
+        return _CLASS_KIND.resolve(spec)
+    registered = [n for n, k in _registered_kinds() if not isinstance(k, Exception)]
     raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}), module:Class, ws://HOST:PORT, nor a "
-                     f"file an installed policy kind reads ({[k.name for k in policy_kinds()[:-3]] or 'none'}; a trained "
-                     "baseline's .pt is read once the package is installed: pip install -e .)")
+                     f"file an installed policy kind reads (registered: {registered or 'none'}; a trained baseline's .pt "
+                     "is read once the package is installed: pip install -e .)"
+                     + (f"; kinds that failed to load: {', '.join(broken)}" if broken else ""))
 
 
 def load_policy(spec: str) -> Policy:

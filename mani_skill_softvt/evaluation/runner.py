@@ -297,6 +297,21 @@ def relative_difference(a, b) -> float | None:
     return float(np.max(np.abs(x - y) / np.maximum(np.abs(y), np.finfo(float).tiny)))
 
 
+def single_run(records: list[dict], path: Path) -> str | None:
+    """Check that ``records`` (of ``path``) are of one run (policy, modes, camera size, policy
+    file) and hold each episode once; the run's policy file hash (None for other policies)."""
+    # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
+    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
+    hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
+    if len(runs) > 1 or len(hashes) > 1:
+        raise ValueError(f"{path} holds records of {max(len(runs), len(hashes))} run configurations (policy, modes, "
+                         "camera size, policy file); give a file of one run")
+    keys = [episode_key(r) for r in records]
+    if len(set(keys)) < len(keys):
+        raise ValueError(f"{path}: an episode appears twice; keep one record of each")
+    return next(iter(hashes), None)
+
+
 def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
               progress=None) -> list[tuple[dict, dict | None, list[str]]]:
     """Run the first ``per_task`` recorded episodes of each task in ``path`` again (None: all), with
@@ -311,14 +326,9 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
     records = read_records(path)
     if not records:
         raise ValueError(f"{path}: no records to reproduce")
-    # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
-    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
-    hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
-    if len(runs) > 1 or len(hashes) > 1:
-        raise ValueError(f"{path} holds records of {max(len(runs), len(hashes))} run configurations (policy, modes, "
-                         "camera size, policy file); reproduce a file of one run")
+    sha = single_run(records, path)
     first = records[0]
-    spec, sha = first["policy"], next(iter(hashes), None)
+    spec = first["policy"]
     if sha is not None and not Path(spec).is_file():
         raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
                          "name it from (the repository root for committed policies)")

@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.metrics import paired_comparison, percent, percent_ci, summarize
-from ..evaluation.protocols import episode_key
-from ..evaluation.runner import read_records
+from ..evaluation.runner import read_records, single_run
 from ..fileio import atomic_write, atomic_write_json
 from ..tasks.suites import OOD_CONDITIONS
 from .results import variant_of
@@ -248,13 +247,19 @@ def main(argv=None) -> dict:
         ood = read_records(path)
         if not ood:
             ap.error(f"{path} holds no records")
-        keys = [episode_key(r) for r in ood]
-        if len(set(keys)) < len(keys):
-            ap.error(f"{path}: an episode appears twice; keep one record of each")
         id_path = path.with_name(path.name.replace("_ood_", "_id_"))
         if not id_path.is_file():
             ap.error(f"{path}: its ID records {id_path} are missing; evaluate the policy on the ID protocol first")
-        runs[variant_of(ood[0])] = (ood, read_records(id_path))
+        id_records = read_records(id_path)
+        try:
+            shas = {single_run(ood, path), single_run(id_records, id_path)}
+        except ValueError as e:
+            ap.error(str(e))
+        if len(shas) > 1:
+            ap.error(f"{path} and {id_path} were made with different policy files (their policy_sha256 differ)")
+        if variant_of(ood[0]) in runs:
+            ap.error(f"two files of variant {variant_of(ood[0])}: {path} and another; report one run of each")
+        runs[variant_of(ood[0])] = (ood, id_records)
     result = analyse(runs)
     text = build(result)
     atomic_write(args.out / "ood.md", lambda p: p.write_text(text))

@@ -2,13 +2,17 @@
 
     lerobot-eval --policy.path=outputs/train/dp/checkpoints/last/pretrained_model \\
         --env.type=softvt --env.task=SoftVTObjectSoft-v1 --env.task_ids='[3]' \\
-        --eval.n_episodes=10 --eval.batch_size=1 --seed=0 --policy.device=cpu
+        --eval.n_episodes=10 --eval.batch_size=1 --policy.device=cpu
 
 ``lerobot-eval``'s success rate is task success (TSR). Every episode's SoftVT record (R_max against
 the calibration card, DSR, collapsed tets, how it ended) goes to ``<output_dir>/softvt/``, with the
 report and R_t plot beside it, where ``python -m mani_skill_softvt.evaluate --rescore`` and the
-report tools read it. The env is :class:`mani_skill_softvt.evaluation.lerobot_env.LeRobotEnv`;
-this module only tells LeRobot how to build it.
+report tools read it; evaluations during ``lerobot-train`` (``--env.type=softvt``) leave theirs in
+``<output_dir>/eval/softvt_<k>/``, one folder per evaluation. The env is
+:class:`mani_skill_softvt.evaluation.lerobot_env.LeRobotEnv`; this module only tells LeRobot how to
+build it. The envs of a batch step one after another in LeRobot's process (a SyncVectorEnv):
+each is a CPU physics job of its own, and a worker process per (task, condition, batch slot),
+started up front, would cost more than it saves.
 """
 
 from __future__ import annotations
@@ -22,11 +26,13 @@ from pathlib import Path
 import gymnasium as gym
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.configs.eval import EvalPipelineConfig
+from lerobot.configs.train import TrainPipelineConfig
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.utils import freeze_after_episode_end
 from lerobot.utils.constants import ACTION
 
 from mani_skill_softvt.data.lerobot import FPS, frame_feature_shapes
+from mani_skill_softvt.data.seeds import ID_EPISODES_PER_TASK
 from mani_skill_softvt.evaluation.lerobot_env import LeRobotEnv, records_path, suite_of_env_id
 from mani_skill_softvt.evaluation.runner import read_records
 from mani_skill_softvt.observations import parse_image_size
@@ -42,23 +48,39 @@ def _env_key(feature: str) -> str:
     return "agent_pos" if feature == "observation.state" else feature.removeprefix("observation.")
 
 
-def _running_eval() -> EvalPipelineConfig | None:
-    """The config of the ``lerobot-eval`` run that is building these envs, if one is.
+def _running_pipeline() -> EvalPipelineConfig | TrainPipelineConfig | None:
+    """The config of the ``lerobot-eval`` or ``lerobot-train`` run that is building these envs.
 
     LeRobot hands an env config nothing of its run, so its output directory (where the records
-    belong) and its policy (which the records name) are read from the ``EvalPipelineConfig`` that
-    ``eval_main`` holds while it makes the envs, one of this call's callers."""
+    belong), its seed and episode count (which episodes it counts) and its policy (which the records
+    name) are read from the pipeline config that ``eval_main`` or the trainer holds while it makes
+    the envs, one of this call's callers."""
     frame = inspect.currentframe()
     while frame is not None:
         for value in frame.f_locals.values():
-            if isinstance(value, EvalPipelineConfig):
+            if isinstance(value, (EvalPipelineConfig, TrainPipelineConfig)):
                 return value
         frame = frame.f_back
     return None
 
 
-def _policy_identity(run: EvalPipelineConfig | None) -> tuple[str, str | None]:
+def _records_dir(run, default: str | None) -> Path:
+    """``<output_dir>/softvt`` of a ``lerobot-eval`` run; ``<output_dir>/eval/softvt_<k>`` for the
+    k-th evaluation of a ``lerobot-train`` run; ``default`` (``--env.records_dir``) first."""
+    if default:
+        return Path(default)
+    if run is None or not run.output_dir:
+        return Path("outputs") / "softvt"
+    if isinstance(run, EvalPipelineConfig):
+        return Path(run.output_dir) / "softvt"
+    k = 1 + len(list((Path(run.output_dir) / "eval").glob("softvt_*")))
+    return Path(run.output_dir) / "eval" / f"softvt_{k}"
+
+
+def _policy_identity(run) -> tuple[str, str | None]:
     """(how the records name the policy, the SHA-256 of its weights file if there is one)."""
+    if isinstance(run, TrainPipelineConfig):
+        return f"lerobot:{run.policy.type}@{run.output_dir} (in training)", None
     policy = None if run is None else run.policy
     if policy is None:
         return "lerobot", None
@@ -130,24 +152,28 @@ class SoftVTEnvConfig(EnvConfig):
         """``{suite: {task_id: env}}`` for the ID protocol, ``{suite/condition: {...}}`` for OOD, so
         LeRobot's per-group numbers are per condition. Refuses a records file that already holds
         records (a second run into the same output directory): nothing is overwritten."""
-        run = _running_eval()
+        run = _running_pipeline()
         spec, sha = _policy_identity(run)
-        out_dir = self.records_dir or (Path(run.output_dir) if run is not None and run.output_dir else Path("outputs"))
-        records = records_path(out_dir, self.suite, self.protocol, spec.split("@")[0].replace(":", "-"))
+        first_seed = 0 if run is None or run.seed is None else int(run.seed)
+        counted = None if run is None else int(run.eval.n_episodes)
+        if counted is not None and counted > ID_EPISODES_PER_TASK:
+            raise ValueError(f"--eval.n_episodes={counted}: the protocol has {ID_EPISODES_PER_TASK} episodes a task "
+                             "(and condition); ask for at most that many")
+        name = spec.split("@")[0].replace(":", "-")
+        records = records_path(_records_dir(run, self.records_dir), self.suite, self.protocol, name)
         if records.exists() and read_records(records):
             raise FileExistsError(f"{records} already holds SoftVT records of an earlier run; give lerobot-eval "
                                   "another --output_dir (or --env.records_dir), or move that file away")
         conditions = ["id"] if self.protocol == "id" else list(self.conditions or OOD_CONDITIONS)
         tasks = [int(t) for t in self.task_ids] if self.task_ids else list(range(NUM_TASKS))
-        vector = gym.vector.AsyncVectorEnv if use_async_envs and n_envs > 1 else gym.vector.SyncVectorEnv
-        extra = {"context": "forkserver"} if vector is gym.vector.AsyncVectorEnv else {}
         envs: dict[str, dict[int, gym.vector.VectorEnv]] = {}
         for condition in conditions:
             group = self.suite if condition == "id" else f"{self.suite}/{condition}"
             envs[group] = {}
             for t in tasks:
                 make = partial(LeRobotEnv, self.suite, t, self.protocol, None if condition == "id" else condition,
-                               records=records, policy_spec=spec, policy_sha256=sha, **self.gym_kwargs)
-                envs[group][t] = vector([freeze_after_episode_end(make) for _ in range(n_envs)],
-                                        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **extra)
+                               records=records, policy_spec=spec, policy_sha256=sha, first_seed=first_seed,
+                               recorded_episodes=counted, **self.gym_kwargs)
+                envs[group][t] = gym.vector.SyncVectorEnv([freeze_after_episode_end(make) for _ in range(n_envs)],
+                                                          autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
         return envs
