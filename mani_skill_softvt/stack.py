@@ -18,11 +18,25 @@ from .version import __version__
 STACK_DISTRIBUTIONS = ("torch", "numpy", "warp-lang", "newton", "sapien", "mani-skill", "diffusers")
 
 
+def cpu_model() -> str:
+    """The processor's model name: machines of one kind can differ in it (an AMD EPYC and an Intel
+    Xeon round the same episode differently, and a learned policy's closed loop amplifies that)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 @lru_cache(maxsize=1)
 def _stack() -> tuple[tuple[str, str | None], ...]:
     import cv2  # the OpenCV that runs (two opencv distributions may be installed, and one wins)
 
-    out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__}
+    out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__,
+           "cpu": cpu_model()}
     for dist in STACK_DISTRIBUTIONS:
         try:
             out[dist] = metadata.version(dist)
