@@ -59,3 +59,23 @@ def test_vt_against_vo_on_the_same_episodes(tmp_path):
     with pytest.raises(SystemExit):
         O.main([str(tmp_path / "object_soft_id_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out")])  # not an OOD file
     assert len(O.PAPER_DP_OBJECT_SOFT["vo-c"]) == len(OOD_CONDITIONS)
+
+
+def test_twins_from_the_ood_machine_replace_the_committed_ones(tmp_path):
+    # The committed ID records say every twin succeeded; the twins re-run on the OOD machine say
+    # none did: the paired change is read against the re-run, the change of rates against all ID.
+    vo = [_rec(0, i, "mass_x2.5", True, 0.5) for i in range(10)]
+    (tmp_path / "object_soft_ood_vo-c-cpu.jsonl").write_text("".join(json.dumps(r) + "\n" for r in vo))
+    committed = [_rec(0, i, "id", True, 0.5) for i in range(50)]
+    (tmp_path / "object_soft_id_vo-c-cpu.jsonl").write_text("".join(json.dumps(r) + "\n" for r in committed))
+    (tmp_path / "twins").mkdir()
+    rerun = [_rec(0, i, "id", False, 0.5) for i in range(10)]
+    (tmp_path / "twins" / "object_soft_id_vo-c-cpu.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rerun))
+    result = O.main([str(tmp_path / "object_soft_ood_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out"),
+                     "--twins", str(tmp_path / "twins")])
+    v = result["variants"]["vo-c,cpu"]
+    assert v["paired_tsr"]["difference"] == pytest.approx(1.0) and v["id"]["tsr"] == 1.0
+    assert v["stiffness"][1.0]["tsr"] == 0.0  # x1.0 is the twins the OOD episodes pair with
+    with pytest.raises(SystemExit):
+        O.main([str(tmp_path / "object_soft_ood_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out"),
+                "--twins", str(tmp_path / "nowhere")])

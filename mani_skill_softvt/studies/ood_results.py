@@ -18,6 +18,11 @@ McNemar) on those twins, beside the paper's Delta against its full ID entry. Wri
 - where two variants ran the same episodes, VO against VT per condition and pooled (paired).
 
 A run still in progress is reported as it stands: each row says how many episodes it holds.
+
+``--twins DIR`` reads the ID twins from ``DIR/<suite>_id_<policy>.jsonl`` instead: the ID
+episodes run again on the machine and stack the OOD episodes ran on. A learned policy's closed loop
+amplifies another machine's rounding into other episodes (docs/install.md), so episodes pair best
+with twins from their own machine; the change against all ID episodes stays a change of rates.
 """
 
 from __future__ import annotations
@@ -88,11 +93,12 @@ def r_max_stats(records: list[dict]) -> dict:
     return {"median": float(med), "iqr": (float(q1), float(q3)), "n": int(x.size)}
 
 
-def analyse(runs: dict[str, tuple[list[dict], list[dict]]]) -> dict:
-    """``runs``: variant -> (OOD records, ID records). Everything the report prints."""
+def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str, list[dict]] | None = None) -> dict:
+    """``runs``: variant -> (OOD records, ID records); ``twins_from``: variant -> the ID records to
+    take the twins from (default: its ID records). Everything the report prints."""
     out = {"variants": {}, "vo_vs_vt": {}}
     for variant, (ood, id_records) in runs.items():
-        twins = id_twins(ood, id_records)
+        twins = id_twins(ood, (twins_from or {}).get(variant, id_records))
         tasks = {(r["suite"], r["task_id"]) for r in ood}  # a run in progress: its tasks so far
         id_records = [r for r in id_records if (r["suite"], r["task_id"]) in tasks]
         by_condition = defaultdict(list)
@@ -194,7 +200,8 @@ def build(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path) -> None:
+def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
+                twins_from: dict[str, list[dict]] | None = None) -> None:
     """TSR and DSR against each factor's value, one line per variant, the ID twins at nominal."""
     import matplotlib
 
@@ -210,7 +217,7 @@ def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path) -> No
     fig, axes = plt.subplots(2, len(factors), figsize=(4.2 * len(factors), 6), squeeze=False, sharey=True)
     for col, (key, pts) in enumerate(factors.items()):
         for j, (variant, (ood, id_records)) in enumerate(runs.items()):
-            twins = id_twins(ood, id_records)
+            twins = id_twins(ood, (twins_from or {}).get(variant, id_records))
             xs, tsr, dsr = [], [], []
             for value, name in sorted(pts + [(getattr(nominal, key), "id")]):
                 sel = twins if name == "id" else [r for r in ood if r["condition"] == name]
@@ -237,8 +244,10 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("ood", nargs="+", type=Path, help="OOD records files (<suite>_ood_<policy>.jsonl)")
     ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    ap.add_argument("--twins", type=Path, default=None, metavar="DIR",
+                    help="read the ID twins from DIR/<suite>_id_<policy>.jsonl (re-run on the OOD episodes' machine)")
     args = ap.parse_args(argv)
-    runs = {}
+    runs, twins_from = {}, {}
     for path in args.ood:
         if not path.is_file():
             ap.error(f"{path} does not exist")
@@ -260,11 +269,22 @@ def main(argv=None) -> dict:
         if variant_of(ood[0]) in runs:
             ap.error(f"two files of variant {variant_of(ood[0])}: {path} and another; report one run of each")
         runs[variant_of(ood[0])] = (ood, id_records)
-    result = analyse(runs)
+        if args.twins is not None:
+            twin_path = args.twins / id_path.name
+            if not twin_path.is_file():
+                ap.error(f"--twins: {twin_path} does not exist; run the ID twins there first (docs/baselines.md)")
+            twins = read_records(twin_path)
+            try:
+                if single_run(twins, twin_path) not in shas:
+                    ap.error(f"{twin_path} was made with another policy file than {path}")
+            except ValueError as e:
+                ap.error(str(e))
+            twins_from[variant_of(ood[0])] = twins
+    result = analyse(runs, twins_from)
     text = build(result)
     atomic_write(args.out / "ood.md", lambda p: p.write_text(text))
     atomic_write_json(args.out / "ood.json", result)
-    plot_curves(runs, args.out / "ood_curves.png")
+    plot_curves(runs, args.out / "ood_curves.png", twins_from)
     print(text)
     return result
 
