@@ -34,6 +34,7 @@ def cpu_model() -> str:
 @lru_cache(maxsize=1)
 def _stack() -> tuple[tuple[str, str | None], ...]:
     import cv2  # the OpenCV that runs (two opencv distributions may be installed, and one wins)
+    import torch  # its own version names the build (+cpu, +cu130), which the distribution's does not
 
     out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__,
            "cpu": cpu_model()}
@@ -42,6 +43,7 @@ def _stack() -> tuple[tuple[str, str | None], ...]:
             out[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:
             out[dist] = None
+    out["torch"] = torch.__version__
     return tuple(out.items())
 
 
