@@ -275,10 +275,12 @@ def test_env_episode_scored_the_same_in_process_and_served():
             remote = WebsocketPolicy(url, connect_timeout=10, reply_timeout=30)
             served = run_episode(env, remote, episode)
             remote.close()
-        # The server is gone: the next episode is a recorded policy_error naming it, not a crash or a hang.
+        # The server is gone: the next episode is a recorded policy_error naming it, not a crash or a hang
+        # (a hang would wait out the 30 s reply timeout; a refused connection ends at once, after the
+        # episode's reset, which rebuilds the scene: seconds, more on a loaded machine).
         t0 = time.perf_counter()
         refused = run_episode(env, remote, episode, policy_spec=url)
-        assert time.perf_counter() - t0 < 15
+        assert time.perf_counter() - t0 < remote.reply_timeout
     finally:
         if env is not None:
             env.close()
