@@ -90,7 +90,7 @@ def test_a_lerobot_policy_sees_observations_only_and_a_nan_is_a_recorded_result(
     env.close()
     assert spy.seen - {"task"} and all(k.startswith(ALLOWED) for k in spy.seen - {"task"}), spy.seen
     assert not out["success"].any() and spy.calls == 3
-    (rec,) = read_records(next((tmp_path / "softvt").glob("*.jsonl")))
+    (rec,) = read_records(next(tmp_path.glob("*.jsonl")))  # --env.records_dir: the records go there
     assert rec["termination"] == "policy_error" and rec["steps"] == 2 and rec["condition"] == "youngs_modulus_x0.5"
     assert rec["receipt"]["stack"]["numpy"] == np.__version__ and rec["receipt"]["stack"]["python"].startswith("3.12")
 

@@ -218,7 +218,7 @@ class LeRobotEnv(gym.Env):
             self._env = None
 
 
-def records_path(out_dir: str | Path, suite: str, protocol: str, policy_name: str) -> Path:
-    """Where a LeRobot run's records go: ``<out_dir>/softvt/<suite>_<protocol>_<policy name>.jsonl``
-    (the run's output directory names the run; the records name the policy's path and hash)."""
-    return Path(out_dir) / "softvt" / f"{records_stem(suite, protocol, policy_name)}.jsonl"
+def records_path(records_dir: str | Path, suite: str, protocol: str, policy_name: str) -> Path:
+    """Where a LeRobot run's records go: ``<records_dir>/<suite>_<protocol>_<policy name>.jsonl``
+    (the run's directory names the run; the records name the policy's path and hash)."""
+    return Path(records_dir) / f"{records_stem(suite, protocol, policy_name)}.jsonl"
