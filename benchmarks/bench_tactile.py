@@ -89,7 +89,7 @@ def held_grasp_envs():
 
     import mani_skill_softvt  # noqa: F401
     from mani_skill_softvt.calibration import protocol as P
-    from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
+    from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
     from mani_skill_softvt.paths import CALIBRATION_DIR
 
     for asset in GRASP_ASSETS:

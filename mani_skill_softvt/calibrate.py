@@ -18,21 +18,96 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+from . import tasks  # noqa: F401  (registers SoftGraspLift-v1)
 from .assets.cards import ASSET_IDS
 from .calibration import protocol as P
+from .calibration.cards import CalibrationCard, load_calibration_card, make_card, write_card
+from .calibration.plots import plot_card, plot_summary
+from .calibration.stats import slip_distance
+from .data.seeds import calibration_seed
+from .expert.grasp_script import GraspPlan, run_grasp_script
+from .fileio import append_jsonl, read_jsonl
+from .parallel import run_tasks
 from .paths import CALIBRATION_DIR, writable_default
+from .physics.constants import physics_signature, signature_mismatch
+from .physics.transforms import yaw_between
 
 QUICK_ASSET = "soft_stw_cube_hq"
 QUICK_CLOSURES = (0.3, 0.5, 0.7, 0.9)
 
 
+# ------------------------------------------------------------- one trial, one asset's sweep
+def run_trial(env, closure: float, seed: int, youngs_modulus_scale: float = 1.0) -> dict:
+    """Grasp at ``closure``, lift, hold 2 s; report held/slip, peak D and the jaw aperture."""
+    env.reset(seed=seed, options={"youngs_modulus_scale": youngs_modulus_scale})
+    u = env.unwrapped
+    rng = np.random.default_rng(seed)
+    offset = rng.uniform(-P.JITTER_XY, P.JITTER_XY, 2)
+    yaw = yaw_between(u.rest_vertices("object"), u.settled_nodes("object")) + rng.uniform(-P.JITTER_YAW, P.JITTER_YAW)
+    plan = GraspPlan(closure=float(closure), yaw=float(yaw), steps=dict(P.STEPS))
+    lift_end = P.STEPS["approach"] + P.STEPS["descend"] + P.STEPS["close"] + P.STEPS["lift"]
+    count = [0]
+
+    def on_step(phase, i, n):
+        count[0] += 1
+        # Not lifted at the end of the lift phase: the hold cannot change the verdict.
+        if count[0] == lift_end and u.soft_nodes().min(axis=0)[2] < P.LIFT_THRESHOLD:
+            return "stop"
+
+    rec = run_grasp_script(env, plan, on_step=on_step, xy_offset=offset)
+    hold = rec["phase"] == "hold"
+    lifted = bool(hold.any() and rec["object_min_z"][hold][-1] >= P.LIFT_THRESHOLD)
+    slip = slip_distance(rec["object_centroid"][hold], rec["tcp"][hold], rec["tcp_quat"][hold]) if lifted else None
+    closed = rec["phase"] == "close"
+    aperture = rec["gripper_width"][hold].mean() if lifted else rec["gripper_width"][closed][-1]
+    return {
+        "closure": float(closure), "seed": int(seed), "held": bool(lifted and slip <= P.SLIP_THRESHOLD),
+        "lifted": lifted, "slip_mm": None if slip is None else 1e3 * slip,
+        "peak_deformation": float(rec["deformation"].max()), "aperture_mm": 1e3 * float(aperture),
+        "pad_force_n": float(np.mean(rec["pad_force"][hold])) if lifted else float(rec["pad_force"][closed][-1]),
+    }
+
+
+def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_path: Path, progress=None) -> list[dict]:
+    """Run every (closure, repeat) trial not yet in ``log_path``; return all records.
+
+    Each finished trial is appended to the JSONL log at once, so an interrupted sweep resumes
+    where it stopped and never repeats or loses a trial. A log whose trials ran under other
+    physics (:func:`physics_signature`) is refused rather than mixed into the new card.
+    """
+    previous = read_jsonl(log_path)
+    stale = sorted({d for r in previous for d in signature_mismatch(r.get("physics"))})
+    if stale:
+        raise ValueError(f"sweep log {log_path} holds trials run under other physics ({'; '.join(stale)}); "
+                         "move it away to recalibrate from scratch (python -m mani_skill_softvt.calibrate "
+                         f"--restart --assets {asset_id} does that)")
+    done = {(round(r["closure"], 6), r["repeat"]) for r in previous}
+    todo = [(g, k) for g in closures for k in range(repeats) if (round(g, 6), k) not in done]
+    if progress is not None:
+        progress(len(closures) * repeats - len(todo), len(closures) * repeats)
+    if todo:
+        env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
+        try:
+            for g, k in todo:
+                rec = run_trial(env, g, calibration_seed(asset_index, g, k))
+                rec.update(asset_id=asset_id, repeat=k, physics=physics_signature())
+                append_jsonl(log_path, rec)
+                if progress is not None:
+                    progress(1, None)
+        finally:
+            env.close()
+    records = [r for r in read_jsonl(log_path) if round(r["closure"], 6) in {round(g, 6) for g in closures}]
+    return sorted(records, key=lambda r: (r["closure"], r["repeat"]))
+
+
+# ------------------------------------------------------------------------- the command
 def calibrate_asset(asset_id: str, closures=P.CLOSURES, repeats: int = P.REPEATS, percentile: float = P.PERCENTILE,
                     out: Path = CALIBRATION_DIR, queue=None, write: bool = True) -> dict:
     """Sweep one asset (resuming from its log) and write its card and plot; return the card."""
-    from .calibration.cards import CalibrationCard, make_card, write_card
-    from .calibration.plots import plot_card
-    from .calibration.sweep import sweep_asset
-
     out = Path(out)
     log = out / ".sweeps" / f"{asset_id}.jsonl"
 
@@ -87,13 +162,10 @@ def main(argv=None) -> list[dict]:
     if args.workers < 1:
         ap.error("--workers must be >= 1")
 
-    from tqdm import tqdm
-
     if args.restart:
         for a in assets:
             set_aside(Path(args.out) / ".sweeps" / f"{a}.jsonl")
     total = len(assets) * len(closures) * repeats
-    from .parallel import run_tasks
 
     bar = tqdm(total=total, desc="calibration trials", unit="trial")
     cards = []
@@ -108,9 +180,6 @@ def main(argv=None) -> list[dict]:
             tqdm.write(_row(value))
     bar.close()
     if len(assets) > 1 or not args.quick:
-        from .calibration.cards import load_calibration_card
-        from .calibration.plots import plot_summary
-
         all_cards = []
         for a in ASSET_IDS:
             try:
@@ -135,8 +204,6 @@ def set_aside(log: Path) -> Path | None:
 
 def comparison_table(directory: Path = CALIBRATION_DIR) -> str:
     """Markdown table of the committed cards beside the paper's values."""
-    from .calibration.cards import load_calibration_card
-
     lines = ["| asset | g_min | g_max | span mm | tau_o % diag | paper g_min | paper g_max | paper span mm | paper tau_o % |",
              "|---|---|---|---|---|---|---|---|---|"]
     for a in ASSET_IDS:

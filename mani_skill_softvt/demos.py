@@ -20,17 +20,42 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
+import os
 import time
 from collections import Counter
 from pathlib import Path
 
+import h5py
 import numpy as np
+from mani_skill.trajectory.merge_trajectory import merge_trajectories
+from matplotlib.figure import Figure
+from tqdm import tqdm
 
 from .data.demo_set import DemoSet
-from .fileio import append_jsonl, atomic_write_json, read_json
-from .observations import camera_sensor_configs, parse_image_size, tactile_keys
+from .data.lerobot import export_lerobot
+from .data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
+from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
+from .data.trajectory import (
+    CorruptDataError,
+    check_h5,
+    episode_digest,
+    episode_json_line,
+    open_h5,
+    read_episode,
+    rendering_current,
+    screen,
+    state_dict_at,
+    write_rendering,
+)
+from .evaluation.wrapper import make_env
+from .expert.pick_place import DEFAULT_PLANNER
+from .expert.solution import SOURCE_DESC, solve
+from .fileio import append_jsonl, atomic_write, atomic_write_json, read_json
+from .observations import camera_sensor_configs, camera_size_name, flatten_batch, parse_image_size, tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
+from .physics.constants import physics_signature, signature_mismatch
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .tasks.suites import NUM_TASKS, SUITES
 
@@ -42,15 +67,6 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
     ``env`` is a DSR-wrapped suite env, reused across episodes. The episode is written under a
     temporary name and renamed when screened, so a killed run never leaves a half-written demo.
     """
-    import os
-
-    import logging
-
-    from .data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
-    from .data.trajectory import read_episode, screen
-    from .expert.solution import solve
-    from .expert.solution import SOURCE_DESC
-
     tmp_h5, tmp_json = episode_paths(path.with_name(f"{path.stem}.partial.h5"))
     with quiet_maniskill_logger(logging.ERROR):  # "not installed with git": a pip install has no commit to record
         rec = SoftVTRecordEpisode(env, output_dir=str(path.parent), trajectory_name=tmp_h5.stem, save_video=False,
@@ -79,10 +95,6 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     in order until that many are accepted (at most ``num`` seeds), keeping every seed generated
     before (a smaller ``accepted`` never shrinks the set, nor its renderings). The progress queue
     gets one per seed, or with ``accepted`` one per accepted demo (at most ``accepted``)."""
-    from .data.seeds import train_seed
-    from .data.trajectory import episode_json_line
-    from .evaluation.wrapper import make_env
-
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     seeds, kept = [], 0
@@ -115,12 +127,6 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
 def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
     """Pack the task's accepted episodes into ``task<k>.h5`` + ``.json`` with ManiSkill's
     ``merge_trajectories`` (written under temporary names, then renamed)."""
-    import os
-
-    from mani_skill.trajectory.merge_trajectory import merge_trajectories
-
-    from .data.record import episode_paths, quiet_maniskill_logger
-
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
@@ -155,11 +161,6 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     With ``ray_address`` the tasks write their episodes on the Ray worker's node, so on a
     multi-node cluster ``out`` must be on a shared filesystem.
     """
-    from tqdm import tqdm
-
-    from .expert.pick_place import DEFAULT_PLANNER
-    from .physics.constants import physics_signature, signature_mismatch
-
     if accepted is not None and not 1 <= accepted <= num:
         raise ValueError(f"--accepted {accepted}: give 1 to --num ({num}); --num caps the seeds a task draws")
     planner = planner or DEFAULT_PLANNER
@@ -196,8 +197,6 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
                     num: int | None) -> None:
     """``manifest.json``: per task the training-seed range generated (from its QC log, or the first
     ``num`` if more) and the ID evaluation range, which never overlap."""
-    from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
-
     def last_index(t: int) -> int:
         logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
         return max(logged + [(num or 0) - 1, 0])
@@ -238,14 +237,8 @@ def stats(suite: str, out: Path) -> dict:
                **_r_max_summary(all_r), "unreadable_files": corrupt}
     atomic_write_json(demo_set.stats, summary)
     if all_r:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        from .fileio import atomic_write
-
-        fig, ax = plt.subplots(figsize=(5, 3))
+        fig = Figure(figsize=(5, 3))
+        ax = fig.subplots()
         ax.hist(all_r, bins=20, range=(0, 1.2), color="tab:blue")
         ax.axvline(1.0, color="k", ls="--")
         ax.set_xlabel("R_max per demo")
@@ -253,7 +246,6 @@ def stats(suite: str, out: Path) -> dict:
         ax.set_title(f"{suite}: {len(all_r)} accepted demos")
         fig.tight_layout()
         atomic_write(demo_set.r_max_histogram, lambda p: fig.savefig(p, dpi=120))
-        plt.close(fig)
     return summary
 
 
@@ -261,8 +253,6 @@ def _unreadable_files(demo_set: DemoSet, task_id: int, accepted: list[dict]) -> 
     """Why each of the task's demo files that should be readable is not: the accepted episodes and
     the merged trajectory are read in full (states only, small); renderings (images, large) are
     opened, which is where a truncated HDF5 file fails."""
-    from .data.trajectory import check_h5
-
     files = [demo_set.episode_file(task_id, q["seed"]) for q in accepted]
     files += [p for p in (demo_set.trajectory(task_id),) if p.exists()]
     problems = [check_h5(p) for p in files] + [check_h5(p, read=False) for p in demo_set.renderings(task_id)]
@@ -308,10 +298,6 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     ``replay_trajectory --use-env-states`` steps the physics before each restore). Returns the
     episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """
-    from .data.trajectory import state_dict_at, write_rendering
-    from .evaluation.wrapper import make_env
-    from .observations import camera_sensor_configs, flatten_batch
-
     env = None
 
     def observe(seed: int, states: dict) -> list[dict]:
@@ -347,10 +333,6 @@ def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[s
     the same states (:func:`~mani_skill_softvt.data.trajectory.rendering_current`: the source's
     digest, the ``needed`` observation keys, frames of ``tactile_model`` if given); a re-run of
     render skips such a task."""
-    import h5py
-
-    from .data.trajectory import episode_digest, rendering_current
-
     if not rendered_h5.exists():
         return False
     try:
@@ -448,10 +430,6 @@ def _generate(ap: argparse.ArgumentParser, args) -> dict:
 
 
 def _render(ap: argparse.ArgumentParser, args) -> None:
-    from tqdm import tqdm
-
-    from .data.trajectory import CorruptDataError, open_h5
-    from .observations import camera_size_name
 
     if args.workers < 1:
         ap.error("--workers must be >= 1")
@@ -472,7 +450,6 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
             print(f"task {t}: already rendered (delete {dst.name} to redo it)")
         else:
             todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
-    from .parallel import run_tasks
 
     size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
     try:
@@ -493,8 +470,6 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
 
 
 def _export_lerobot(ap: argparse.ArgumentParser, args) -> dict:
-    from .data.lerobot import export_lerobot
-
     demo_set = DemoSet(args.out, args.suite)
     tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
     try:

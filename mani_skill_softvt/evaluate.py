@@ -26,16 +26,11 @@ from tqdm import tqdm
 
 from .calibration.cards import load_calibration_card
 from .evaluation.metrics import rescore_record
+from .evaluation.records import RecordIntegrityError, read_records
 from .evaluation.report import plot_ood_curves, plot_traces, write_report
 from .evaluation.run import DEFAULT_TASKS, RunConfig
-from .evaluation.runner import (
-    RecordIntegrityError,
-    evaluate,
-    read_records,
-    relative_difference,
-    reproduce,
-    run_records,
-)
+from .evaluation.runner import evaluate, relative_difference, reproduce, run_records
+from .evaluation.videos import record_episode_video, video_name
 from .observations import parse_image_size
 from .stack import software_stack, stack_differences
 from .tasks.suites import SUITES, task_spec
@@ -170,8 +165,6 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
 
 def _videos(records: list[dict], run: RunConfig, out: Path) -> None:
     """Videos of ``records`` (re-run in rgb+tactile mode); existing files are kept, so a re-run resumes."""
-    from .evaluation.videos import record_episode_video, video_name
-
     for r in records:
         path = out / video_name(run.stem, r)
         if not path.exists():

@@ -28,14 +28,21 @@ import argparse
 from pathlib import Path
 
 import cv2
+import gymnasium as gym
 import numpy as np
 import sapien
 from tqdm import tqdm
 
+from . import tasks  # noqa: F401  (registers the envs)
 from .assets.cards import ASSET_IDS, TWIN_IDS, AssetCard, load_card, read_obj
 from .assets.tetmesh import vertex_normals
+from .calibration import protocol as P
+from .calibration.cards import load_calibration_card
 from .data.images import write_png
+from .expert.grasp_script import GraspPlan, run_grasp_script
 from .paths import REPO_DIR
+from .tactile.markers import draw_markers
+from .tactile.optics import load_optics
 
 SPACING = 0.3  # m between assets: far enough that no neighbour enters a tile's view
 COLUMNS = 5
@@ -121,8 +128,6 @@ TACTILE_TWINS = ("rigid_stw_cube_hq", "rigid_stw_sphere_hq")
 
 def envelope_middle(asset_id: str) -> float:
     """The middle of the asset's calibrated closure envelope (a twin uses its soft asset's card)."""
-    from .calibration.cards import load_calibration_card
-
     card = load_calibration_card(asset_id.replace("rigid_", "soft_"))
     return 0.5 * (card.g_min + card.g_max)
 
@@ -130,12 +135,6 @@ def envelope_middle(asset_id: str) -> float:
 def held_frame(asset_id: str, closure: float, seed: int = 0):
     """The left finger's TactileFrame 10 steps into the hold of the calibration grasp, and the
     physical contact mask (240, 320) of that pad."""
-    import gymnasium as gym
-
-    from . import tasks  # noqa: F401
-    from .calibration import protocol as P
-    from .calibration.grasp_script import GraspPlan, run_grasp_script
-
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     try:
         env.reset(seed=seed)
@@ -161,9 +160,6 @@ def heat_map(frame, contact: np.ndarray) -> np.ndarray:
 def shading_change(frame) -> np.ndarray:
     """|image - no-contact background with the markers where they are now| per channel, magnified,
     with its largest grey-level change written on it: the indentation's shading alone."""
-    from .tactile.markers import draw_markers
-    from .tactile.optics import load_optics
-
     background = draw_markers(load_optics().background, frame.marker_current)
     diff = np.abs(frame.image.astype(np.int16) - background.astype(np.int16))
     img = np.uint8(np.clip(diff * TACTILE_CHANGE_GAIN, 0, 255))

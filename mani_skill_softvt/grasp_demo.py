@@ -13,8 +13,13 @@ import argparse
 import time
 from pathlib import Path
 
+import gymnasium as gym
+import imageio.v2 as imageio
 import numpy as np
+from tqdm import tqdm
 
+from . import tasks  # noqa: F401  (registers the envs)
+from .expert.grasp_script import GraspPlan, run_grasp_script
 from .fileio import atomic_write
 
 
@@ -27,12 +32,6 @@ def main(argv=None) -> dict:
     ap.add_argument("--video", action="store_true", help="also write an mp4 (renders every control step)")
     args = ap.parse_args(argv)
 
-    import gymnasium as gym
-    import imageio.v2 as imageio
-    from tqdm import tqdm
-
-    from . import tasks  # noqa: F401  (registers envs)
-    from .calibration.grasp_script import GraspPlan, run_grasp_script
 
     t0 = time.time()
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", render_mode="rgb_array")

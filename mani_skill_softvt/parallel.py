@@ -29,6 +29,7 @@ through the queue and need none.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing as mp
 import os
 import pickle
@@ -103,8 +104,6 @@ def _exit_with_parent(parent_pid: int) -> None:
     loaded) running forever, since nothing else ever tells them to stop.
     """
     if sys.platform.startswith("linux"):
-        import ctypes
-
         PR_SET_PDEATHSIG = 1
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != parent_pid:  # the parent died before the line above took effect

@@ -4,7 +4,7 @@ Every episode the package runs goes through :func:`rollout`: an evaluation episo
 (:func:`mani_skill_softvt.evaluation.runner.run_episode`), an expert demonstration (the
 motion-planning solution :func:`mani_skill_softvt.expert.solution.solve`, recorded by
 :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`) and a calibration trial
-(:func:`mani_skill_softvt.calibration.grasp_script.run_grasp_script`). They differ in the policy,
+(:func:`mani_skill_softvt.expert.grasp_script.run_grasp_script`). They differ in the policy,
 the observers, and what ends the episode (``until``):
 
 - ``"episode"``: the env ends it, success or failure (terminated), or the time limit (evaluation);
@@ -25,8 +25,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from mani_skill.utils.common import to_numpy
 
 from .observations import as_bool, info_bool
+from .physics.fem import SimulationInstabilityError
 from .policy import is_privileged
 
 UNTIL = ("episode", "plan", "script")
@@ -72,8 +74,6 @@ def _error_text(e: BaseException, where: str) -> str:
 
 def action_chunk(raw, env, replan_steps: int) -> list:
     """The actions of a chunk that will be executed, each validated by the env (numbers, shape, finite)."""
-    from mani_skill.utils.common import to_numpy
-
     chunk = np.asarray(to_numpy(raw)) if not isinstance(raw, (list, tuple)) else np.asarray(raw)
     if chunk.ndim == 1:
         chunk = chunk[None]
@@ -104,8 +104,6 @@ def rollout(env, policy, seed: int | None = None, *, options: dict | None = None
     one after a chunk's last action, where the policy's ``needs_next_images()`` asks for it
     (policy.py). For evaluators; observers then see observations without camera images.
     """
-    from .physics.fem import SimulationInstabilityError
-
     if until not in UNTIL:
         raise ValueError(f"until={until!r}: choose one of {UNTIL}")
     u = env.unwrapped

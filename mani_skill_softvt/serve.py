@@ -23,6 +23,7 @@ import argparse
 import traceback
 
 import numpy as np
+import torch
 
 from .version import __version__
 from .evaluation.policies import BUILTIN, resolve_policy
@@ -45,8 +46,6 @@ DEFAULT_PORT = 8000  # openpi's default
 
 def _batched(x, dtype=None):
     """A numpy array from the wire as the env's batched (1, ...) torch tensor (a writable copy)."""
-    import torch
-
     return torch.from_numpy(np.array(x, dtype=dtype)[None])
 
 
@@ -102,6 +101,7 @@ def _chunk(policy, obs: dict) -> np.ndarray:
 def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  camera_size: list[int] | None = None):
     """A websockets sync server (not yet serving: call ``serve_forever``; ``shutdown`` stops it)."""
+    # openpi-client and websockets are the optional ``remote`` extra (NumPy < 2): imported only to serve.
     import websockets.sync.server
     from openpi_client import msgpack_numpy
     from websockets.exceptions import ConnectionClosed

@@ -11,6 +11,9 @@ import platform
 from functools import lru_cache
 from importlib import metadata
 
+import cv2
+import torch
+
 from .version import __version__
 
 # The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
@@ -33,9 +36,6 @@ def cpu_model() -> str:
 
 @lru_cache(maxsize=1)
 def _stack() -> tuple[tuple[str, str | None], ...]:
-    import cv2  # the OpenCV that runs (two opencv distributions may be installed, and one wins)
-    import torch  # its own version names the build (+cpu, +cu130), which the distribution's does not
-
     out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__,
            "cpu": cpu_model()}
     for dist in STACK_DISTRIBUTIONS:

@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import time
 
+import gymnasium as gym
+import numpy as np
+
+from . import tasks  # noqa: F401  (registers the envs)
+from .tasks.robot import ee_action
+
 
 def main() -> None:
     t0 = time.time()
-    import gymnasium as gym
-    import numpy as np
-
-    from . import tasks  # noqa: F401
-    from .tasks.robot import ee_action
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose")
     env.reset(seed=0)

@@ -608,7 +608,7 @@ def test_the_recipe_search_scores_snapshots_in_closed_loop_and_resumes(tmp_path,
 def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     # End to end on the real env: the record names the variant and the modes it was resolved to.
     from mani_skill_softvt import evaluate
-    from mani_skill_softvt.evaluation.runner import read_records
+    from mani_skill_softvt.evaluation.records import read_records
 
     _write_demos(tmp_path / "demos")
     path = T.train(make_config("vt-c", **TINY), tmp_path / "demos", tmp_path / "vt-c-tiny", progress=False)
@@ -624,7 +624,7 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
 
 def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
     from mani_skill_softvt.studies import results as report
-    from mani_skill_softvt.evaluation.runner import record_hash
+    from mani_skill_softvt.evaluation.records import record_hash
 
     def rec(variant, seed, success, r_max, policy="x.pt", sha="a" * 64):
         r = ({"suite": "object_soft", "task_id": 0, "condition": "id", "seed": seed, "success": success,

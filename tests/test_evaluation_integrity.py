@@ -17,7 +17,8 @@ from mani_skill_softvt.evaluation.metrics import summarize, tolerance_violated
 from mani_skill_softvt.evaluation.policies import HoldPolicy
 from mani_skill_softvt.evaluation.protocols import episodes
 from mani_skill_softvt.evaluation.run import RunConfig
-from mani_skill_softvt.evaluation.runner import RecordIntegrityError, evaluate, record_hash, run_episode
+from mani_skill_softvt.evaluation.records import RecordIntegrityError, record_hash
+from mani_skill_softvt.evaluation.runner import evaluate, run_episode
 from mani_skill_softvt.fileio import CorruptLogError
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -231,7 +232,8 @@ def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_pat
     assert rec["termination"] == "policy_error" and "NaN" in rec["error"], rec["error"]  # not "cameras seen at"
     assert rec["camera_size"] == [24, 32] and rec["steps"] == 0
     # Another camera size is another run; asking the policy for one it was not trained on is refused.
-    from mani_skill_softvt.evaluation.runner import record_field, run_records
+    from mani_skill_softvt.evaluation.records import migrate_record
+    from mani_skill_softvt.evaluation.runner import run_records
 
     from dataclasses import replace
 
@@ -240,5 +242,6 @@ def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_pat
     with pytest.raises(ValueError, match="trained on 24x32 cameras; evaluate it at that size"):
         RunConfig.resolve("misbehaving_policies:SmallCameras", obs_mode="rgb", camera_size=(84, 84))
     # Records from before the size was kept had the native cameras; state modes have none.
-    assert record_field({"obs_mode": "rgb"}, "camera_size") == [224, 224]
-    assert record_field({"obs_mode": "state_dict"}, "camera_size") is None
+    old = {"obs_mode": "rgb", "success": True, "r_max": 0.5}
+    assert migrate_record(old)["camera_size"] == [224, 224]
+    assert migrate_record(dict(old, obs_mode="state_dict"))["camera_size"] is None

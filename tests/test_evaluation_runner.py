@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mani_skill_softvt.evaluation.run import RunConfig
-from mani_skill_softvt.evaluation.runner import evaluate, record_hash
+from mani_skill_softvt.evaluation.records import record_hash
+from mani_skill_softvt.evaluation.runner import evaluate
 from mani_skill_softvt.fileio import read_jsonl
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt.tasks  # noqa: F401
-from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
+from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
 from mani_skill_softvt.tasks.robot import ee_action
 from mani_skill_softvt.tasks import constants as C
 

@@ -154,6 +154,28 @@ def test_no_module_imports_itself_back():
     assert _cycles(_module_graph()) == []
 
 
+def _package_graph() -> dict[str, set[str]]:
+    """Every subpackage (``physics``, ``tasks``...) or top-level module -> those it imports."""
+    def unit(module: str) -> str:
+        parts = module.split(".")
+        return parts[1] if len(parts) > 1 else parts[0]
+
+    graph: dict[str, set[str]] = {}
+    for name, deps in _module_graph().items():
+        graph.setdefault(unit(name), set()).update(unit(d) for d in deps if unit(d) != unit(name))
+    return graph
+
+
+def test_no_package_imports_itself_back():
+    """The packages form layers: assets below physics (the FEM reads the materials), the
+    calibration cards and their statistics below the tasks that read them; what drives the
+    simulator to calibrate sits above (calibrate.py, expert/grasp_script.py)."""
+    graph = _package_graph()
+    assert _cycles(graph) == []
+    assert "physics" not in graph["assets"]
+    assert not graph["calibration"] & {"tasks", "expert", "data", "evaluation"}
+
+
 def test_the_evaluation_never_imports_the_baselines():
     """Policies load through the evaluation's door (evaluation/policies.py); the baselines register
     their policy files there as an entry point, so the dependency points one way."""

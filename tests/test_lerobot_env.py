@@ -7,7 +7,7 @@ import pytest
 from mani_skill_softvt.data.lerobot import frame_feature_shapes
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.lerobot_env import LeRobotEnv, lerobot_observation, suite_of_env_id
-from mani_skill_softvt.evaluation.runner import read_records, record_hash
+from mani_skill_softvt.evaluation.records import read_records, record_hash
 from mani_skill_softvt.paths import REPO_DIR
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, task_spec
 

@@ -24,7 +24,7 @@ from lerobot.envs.utils import env_to_policy_features  # noqa: E402
 from lerobot.utils.import_utils import register_third_party_plugins  # noqa: E402
 
 from mani_skill_softvt.data.lerobot import frame_feature_shapes  # noqa: E402
-from mani_skill_softvt.evaluation.runner import read_records  # noqa: E402
+from mani_skill_softvt.evaluation.records import read_records  # noqa: E402
 from mani_skill_softvt.paths import REPO_DIR  # noqa: E402
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")

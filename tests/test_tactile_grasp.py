@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 import mani_skill_softvt  # noqa: F401
 from mani_skill_softvt.calibration import protocol as P
-from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
+from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
 from mani_skill_softvt.paths import CALIBRATION_DIR
 from mani_skill_softvt.physics.transforms import yaw_between
 from mani_skill_softvt.physics.deformation import kabsch

@@ -226,7 +226,7 @@ def test_no_evaluator_quantity_reaches_the_observation(env_id, obs_mode):
 
 
 def test_tactile_observation_has_both_fingers_and_reacts_to_a_grasp():
-    from mani_skill_softvt.calibration.grasp_script import GraspPlan, run_grasp_script
+    from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
 
     env = gym.make("SoftVTObjectRigid-v1", task_id=3, obs_mode="rgb+tactile")
     obs, _ = env.reset(seed=0)

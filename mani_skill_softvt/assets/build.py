@@ -18,7 +18,12 @@ import io
 import json
 from pathlib import Path
 
+import coacd
 import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+from trimesh.poses import compute_stable_poses
 
 from ..fileio import atomic_write
 from ..paths import ASSETS_DIR, writable_default
@@ -77,8 +82,6 @@ def _r(x, nd=9):
 
 
 def build_object(asset_id: str, out: Path, resolution: int = DEFAULT_RESOLUTION) -> dict:
-    import trimesh
-
     d = out / "objects" / asset_id
     body, decorations = object_parts(asset_id)
     write_obj(d / "surface.obj", body.vertices, body.faces)
@@ -143,12 +146,6 @@ def stable_rest_pose(parts) -> np.ndarray:
     the shortest arc, so the twin keeps its soft asset's heading (trimesh's frames add a yaw built
     from the tiny horizontal part of a nearly vertical normal: arbitrary, up to 22 deg on these
     assets, and different from machine to machine). The face is chosen by :func:`pick_rest_face`."""
-    import trimesh
-    from scipy.spatial.transform import Rotation
-    from trimesh.poses import compute_stable_poses
-
-    from ..physics.transforms import xyzw_to_wxyz
-
     meshes = [trimesh.Trimesh(v, f) for v, f in parts]
     com = sum(m.center_mass * m.volume for m in meshes) / sum(m.volume for m in meshes)
     hull = trimesh.util.concatenate(meshes).convex_hull
@@ -162,7 +159,7 @@ def stable_rest_pose(parts) -> np.ndarray:
     lo, hi = hull.vertices.min(axis=0), hull.vertices.max(axis=0)
     rlo, rhi = rotated.min(axis=0), rotated.max(axis=0)
     p = np.array([*(0.5 * (lo + hi) - 0.5 * (rlo + rhi))[:2], -rlo[2]])
-    return np.concatenate([p, xyzw_to_wxyz(rotation.as_quat())])
+    return np.concatenate([p, rotation.as_quat(scalar_first=True)])
 
 
 def _within(candidates: np.ndarray, values: np.ndarray, tol: float) -> np.ndarray:
@@ -193,8 +190,6 @@ def pick_rest_face(normals: np.ndarray, tilt: np.ndarray, probability: np.ndarra
 
 # ------------------------------------------------------------------------------------ props
 def _box(lo, hi):
-    import trimesh
-
     m = trimesh.creation.box(bounds=np.array([lo, hi], dtype=np.float64))
     return np.asarray(m.vertices), np.asarray(m.faces)
 
@@ -221,8 +216,6 @@ def _basket_shell(bottom=(0.14, 0.11), top=(0.17, 0.14), height=0.06, wall=0.006
 
 
 def _plate_solid(radius=0.09, floor=0.006, rim_height=0.018, flat=0.065, sections=32):
-    import trimesh
-
     profile = np.array([[0.0, 0.0], [flat + 0.01, 0.0], [radius, rim_height - 0.006], [radius, rim_height],
                         [radius - 0.006, rim_height], [flat, floor], [0.0, floor]])
     m = trimesh.creation.revolve(profile, sections=sections)
@@ -230,24 +223,18 @@ def _plate_solid(radius=0.09, floor=0.006, rim_height=0.018, flat=0.065, section
 
 
 def _convex_decomposition(v, f, max_parts: int = 16):
-    import coacd
-
     coacd.set_log_level("error")
     parts = coacd.run_coacd(coacd.Mesh(v, f), threshold=0.05, seed=0, max_convex_hull=max_parts)
     return sorted(((np.asarray(pv), np.asarray(pf)) for pv, pf in parts), key=lambda p: tuple(p[0].mean(axis=0).round(6)))
 
 
 def _cylinder(r, h, sections=24):
-    import trimesh
-
     m = trimesh.creation.cylinder(radius=r, height=h, sections=sections)
     v = np.asarray(m.vertices) + [0.0, 0.0, h / 2]
     return v, np.asarray(m.faces)
 
 
 def _sphere(r):
-    import trimesh
-
     m = trimesh.creation.icosphere(subdivisions=2, radius=r)
     return np.asarray(m.vertices) + [0.0, 0.0, r], np.asarray(m.faces)
 
@@ -300,7 +287,6 @@ def main(argv=None) -> None:
     ap.add_argument("--only", nargs="*", help="asset ids or prop names to build (default: all)")
     ap.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION)
     args = ap.parse_args(argv)
-    from tqdm import tqdm
 
     try:
         out = args.out if args.out is not None else writable_default(ASSETS_DIR, "--out", "SOFTVT_ASSETS_DIR")

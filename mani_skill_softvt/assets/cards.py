@@ -13,6 +13,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from .. import paths
 from ..paths import ASSETS_DIR, missing_data_hint
@@ -128,8 +129,6 @@ class AssetCard:
         return [read_obj(p) for p in self.collision_files]
 
     def surface_mesh(self):
-        import trimesh
-
         v, f = read_obj(self.surface_file)
         return trimesh.Trimesh(v, f, process=False)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import trimesh
 
 # Kuhn (Freudenthal) split of a hex into 6 tets sharing the main diagonal; neighbouring hexes
 # agree on face diagonals, so the mesh is conforming.
@@ -73,8 +74,6 @@ def tetrahedralize(mesh, resolution: int = 6, volume_correct: bool = True) -> tu
     boundary cuts a little volume off convex surfaces; ``volume_correct`` rescales about c so
     the tet volume equals the surface's (a uniform <2 % push outward), keeping mass = rho * V.
     """
-    import trimesh
-
     if not isinstance(mesh, trimesh.Trimesh) or not mesh.is_watertight:
         raise ValueError("tetrahedralize needs a watertight trimesh.Trimesh (repair or close the surface first)")
     lo, hi = mesh.bounds

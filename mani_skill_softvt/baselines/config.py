@@ -44,6 +44,7 @@ Where this differs from the paper, and why:
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass
 
 VARIANTS = ("vo-c", "vt-c", "vo-b", "vt-b")
@@ -169,8 +170,6 @@ INFERENCE_FIELDS = ("action_steps", "inference_timesteps", "inference_scheduler"
 
 def training_identity(cfg: DPConfig) -> str:
     """The config without its inference fields, as text: equal for runs that train alike."""
-    import json
-
     return json.dumps({k: v for k, v in cfg.to_dict().items() if k not in INFERENCE_FIELDS}, sort_keys=True, default=list)
 
 

@@ -29,6 +29,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from diffusers.optimization import get_cosine_schedule_with_warmup
+from diffusers.training_utils import EMAModel
+from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from ..fileio import atomic_write
@@ -92,9 +95,6 @@ class Training:
     """Model, EMA, optimiser and schedule of one run, with save and load."""
 
     def __init__(self, cfg: DPConfig, stats: dict, steps: int):
-        from diffusers.optimization import get_cosine_schedule_with_warmup
-        from diffusers.training_utils import EMAModel
-
         torch.manual_seed(cfg.seed)  # weight initialisation
         self.cfg, self.steps, self.device = cfg, steps, torch.device(cfg.device)
         self.model = DiffusionPolicyModel(cfg, stats).to(self.device)
@@ -186,12 +186,8 @@ def check_same_run(ckpt: dict, cfg: DPConfig, path: Path, data_key: str | None =
 
 
 def plot_losses(losses: list[float], path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
     steps = np.arange(1, len(losses) + 1)
     ax.semilogy(steps, losses, lw=0.5, alpha=0.4, label="batch")
     if len(losses) >= 50:
@@ -203,7 +199,6 @@ def plot_losses(losses: list[float], path: Path, title: str) -> None:
     ax.legend()
     fig.tight_layout()
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
-    plt.close(fig)
 
 
 def snapshot_path(out: Path, step: int) -> Path:

@@ -1,2 +1,5 @@
-"""Per-object calibration (paper section 3.5): the scripted grasp-lift-hold trial, closure sweeps,
-the gripper envelope and tolerance statistics, calibration cards and their plots."""
+"""Per-object calibration (paper section 3.5), the pure part the tasks read: the protocol's
+constants, the gripper envelope and tolerance statistics, calibration cards and their plots.
+The trials that drive the simulator (the scripted grasp-lift-hold of
+:mod:`mani_skill_softvt.expert.grasp_script`, closure sweeps) are run by
+:mod:`mani_skill_softvt.calibrate`."""

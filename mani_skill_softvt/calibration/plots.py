@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from ..fileio import atomic_write
 from .cards import CalibrationCard
@@ -26,28 +27,19 @@ def _draw(ax, card: CalibrationCard) -> None:
 
 
 def plot_card(card: CalibrationCard, out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(4.5, 3.4))
+    fig = Figure(figsize=(4.5, 3.4))
+    ax = fig.subplots()
     _draw(ax, card)
     ax.legend(fontsize=6, loc="upper left")
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, dpi=120))
-    plt.close(fig)
 
 
 def plot_summary(cards: list[CalibrationCard], out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     cols = 5
     rows = max(1, int(np.ceil(len(cards) / cols)))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.9 * rows), squeeze=False)
+    fig = Figure(figsize=(3.2 * cols, 2.9 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.ravel()[len(cards):]:
         ax.axis("off")
     for ax, card in zip(axes.ravel(), cards):
@@ -55,4 +47,3 @@ def plot_summary(cards: list[CalibrationCard], out: Path) -> None:
     axes.ravel()[0].legend(fontsize=6, loc="upper left")
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, dpi=110))
-    plt.close(fig)

@@ -17,12 +17,14 @@ all find their files through :class:`DemoSet`.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..fileio import read_jsonl
 from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs, camera_size_name
 from ..tasks.suites import NUM_TASKS, get_suite
+from .lerobot import Source
 
 
 @dataclass(frozen=True)
@@ -86,8 +88,6 @@ class DemoSet:
 
     def rendered_sizes(self, task_id: int, obs_mode: str) -> list[tuple[int, int]]:
         """The camera sizes (height, width) the task's episodes are rendered at in ``obs_mode``."""
-        import re
-
         stem = f"task{task_id}_{obs_mode.replace('+', '_')}"
         sizes = [NATIVE_CAMERA_SIZE] if self.rendered(task_id, obs_mode).exists() else []
         for p in self.dir.glob(f"{stem}_*x*.h5"):
@@ -108,8 +108,6 @@ class DemoSet:
         """The (trajectory, rendered) pairs of ``tasks`` (the LeRobot export's and the baselines'
         training input), the renderings with cameras at ``camera_size``; a missing file is named
         with the command that writes it."""
-        from .lerobot import Source
-
         size = f" --camera-size {camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
         out = []
         for t in tasks:

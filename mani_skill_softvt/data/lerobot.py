@@ -23,7 +23,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
+import imageio.v2 as imageio
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from ..fileio import atomic_write, atomic_write_json
 from ..observations import (
@@ -288,8 +291,6 @@ def _jsonable(stats: dict[str, dict[str, np.ndarray]]) -> dict:
 
 def _arrow_table(cols: dict[str, np.ndarray], features: dict[str, dict]):
     """Columns as an Arrow table: scalars as plain columns, vectors as fixed-size lists."""
-    import pyarrow as pa
-
     arrays, names = [], []
     for name, ft in features.items():
         if ft["dtype"] == "video":
@@ -304,16 +305,12 @@ def _arrow_table(cols: dict[str, np.ndarray], features: dict[str, dict]):
 
 
 def _write_parquet(path: Path, table) -> None:
-    import pyarrow.parquet as pq
-
     atomic_write(path, lambda tmp: pq.write_table(table, tmp, compression="snappy"))
 
 
 def tasks_table(tasks: list[str]):
     """meta/tasks.parquet as pandas writes it (task strings as the index named "task"), built with
     pyarrow alone; LeRobot reads it with ``pd.read_parquet`` and looks tasks up by index."""
-    import pyarrow as pa
-
     pandas_meta = {
         "index_columns": ["task"],
         "column_indexes": [{"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object",
@@ -331,8 +328,6 @@ def tasks_table(tasks: list[str]):
 
 def encode_video(path: Path, frames, fps: int) -> int:
     """Encode uint8 (H, W, 3) frames to an h264 mp4 (atomically); return the frame count."""
-    import imageio.v2 as imageio
-
     n = 0
 
     def write(tmp: Path):
@@ -406,8 +401,6 @@ def export_lerobot(sources: list[Source], out_dir: Path, use_videos: bool = True
     own size. Every file is written atomically and ``meta/info.json`` last, so a directory
     with an info.json is a complete dataset.
     """
-    import pyarrow as pa
-
     out_dir = Path(out_dir)
     if out_dir.exists() and any(out_dir.iterdir()):
         raise ValueError(f"{out_dir} is not empty; export into a new directory (or delete this one first)")
@@ -489,8 +482,6 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
 def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: list[dict], rows: list[dict],
                           chunk: int, file: int, fps: int, image_size: tuple[int, int] | None = None) -> None:
     """One mp4 per (video key, file) with the group's episodes back to back; fills the rows' offsets."""
-    from .images import resize_image
-
     def frames():
         for ep in group:
             with open_h5(ep["source"].rendered_h5) as ren:
@@ -513,8 +504,6 @@ def _write_episode_videos(out_dir: Path, video_key: str, obs_key: str, group: li
 
 def _write_episodes_meta(out_dir: Path, rows: list[dict], stats: list[dict]) -> None:
     """meta/episodes/chunk-000/file-000.parquet: offsets per episode plus flattened ``stats/<feature>/<stat>``."""
-    import pyarrow as pa
-
     cols: dict[str, list] = {k: [r[k] for r in rows] for k in rows[0]}
     for f in stats[0]:
         for k in stats[0][f]:

@@ -27,8 +27,10 @@ import logging
 from contextlib import contextmanager
 from pathlib import Path
 
+import h5py
 import numpy as np
 from mani_skill.utils.io_utils import dump_json
+from mani_skill.utils.logging_utils import logger
 from mani_skill.utils.wrappers.record import RecordEpisode
 
 from ..rollout import EvaluatorTrace
@@ -119,8 +121,6 @@ GZIP = {"compression": "gzip", "compression_opts": 4}  # lossless and determinis
 def _gzip_large_datasets(group) -> None:
     """Rewrite the group's large uncompressed datasets (the FEM state: ~2 MB an episode) with gzip:
     RecordEpisode compresses only images. Values and dtypes are unchanged."""
-    import h5py
-
     for key in list(group.keys()):
         item = group[key]
         if isinstance(item, h5py.Group):
@@ -147,8 +147,6 @@ class _NoClose:
 @contextmanager
 def quiet_maniskill_logger(level=logging.WARNING):
     """ManiSkill's logger above INFO for a block (its tools log every file they touch)."""
-    from mani_skill.utils.logging_utils import logger
-
     old = logger.level
     logger.setLevel(level)
     try:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import torch
 
 from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import nest
@@ -142,8 +143,6 @@ def episode_json_line(ep: dict, problems: list[str]) -> str:
 
 def state_dict_at(env_states: dict, t: int) -> dict:
     """Nested env state (ManiSkill's get_state_dict layout, batch of one) at step ``t``."""
-    import torch
-
     return nest({key: torch.from_numpy(np.asarray(v[t])[None]) for key, v in env_states.items()})
 
 

@@ -43,9 +43,10 @@ from ..rollout import episode_end
 from ..tasks.constants import MAX_EPISODE_STEPS
 from ..tasks.suites import SUITES, task_spec
 from .protocols import episodes
+from .records import read_records
 from .report import plot_traces, write_report
 from .run import records_stem
-from .runner import episode_record, read_records
+from .runner import episode_record
 from .wrapper import make_env
 
 IMAGE_PREFIX, STATE_FEATURE = "observation.images.", "observation.state"

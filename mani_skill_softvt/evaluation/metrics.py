@@ -16,6 +16,7 @@ import math
 from collections import defaultdict
 
 import numpy as np
+from .protocols import episode_key
 
 
 def deformation_ratio(d_t, tau_o: float):
@@ -37,17 +38,9 @@ def dsr_success(task_success: bool, r_max: float, collapsed: bool = False) -> bo
 
 
 def collapsed(record: dict) -> bool:
-    """A tet of the record's scene collapsed or inverted during the episode (older records, made
-    when a collapse ended the episode as ``sim_unstable``, have no count: none)."""
-    return bool(record.get("collapsed_steps") or 0)
-
-
-def is_dsr_success(record: dict) -> bool:
-    """The record counts for DSR: its own ``dsr_success`` where it has one, else scored from its
-    success, R_max and collapse (records from before the field)."""
-    if "dsr_success" in record:
-        return bool(record["dsr_success"])
-    return dsr_success(record["success"], record["r_max"], collapsed(record))
+    """A tet of the record's scene collapsed or inverted during the episode (``collapsed_steps``
+    is None where nothing was measured: a worker died)."""
+    return bool(record["collapsed_steps"])
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -86,11 +79,11 @@ def summarize(records: list[dict]) -> dict:
     episodes ended (``terminations``) and how many violated their tolerance.
 
     ``records`` need ``success`` and ``r_max`` (``r_max`` None: not measured, e.g. a worker
-    died); a record's own ``dsr_success`` is used where it has one.
+    died) and ``dsr_success`` (:func:`dsr_success`, as the episode was scored).
     """
     n = len(records)
     t = sum(bool(r["success"]) for r in records)
-    d = sum(is_dsr_success(r) for r in records)
+    d = sum(bool(r["dsr_success"]) for r in records)
     if d > t:
         raise AssertionError("DSR exceeds TSR: a deformation-aware success must be a task success")
     tsr, dsr = (t / n, d / n) if n else (0.0, 0.0)
@@ -144,20 +137,16 @@ def mcnemar_exact_p(only_a: int, only_b: int) -> float:
 
 def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success") -> dict:
     """Two policies on the same episodes (matched by suite, task, condition and seed): how many
-    pairs both / only A / only B / neither got ``outcome`` (``success``, or ``dsr_success`` scored
-    by :func:`is_dsr_success`), the difference of rates with its exact McNemar p-value. Pairing
+    pairs both / only A / only B / neither got ``outcome`` (``success`` or ``dsr_success``), the difference of rates with its exact McNemar p-value. Pairing
     removes the seed-to-seed spread that two independent intervals carry; episodes only one
     policy ran are left out and counted."""
-    from .protocols import episode_key
-
-    got = is_dsr_success if outcome == "dsr_success" else (lambda r: bool(r[outcome]))
     a_by, b_by = {episode_key(r): r for r in a}, {episode_key(r): r for r in b}
     if len(a_by) < len(a) or len(b_by) < len(b):
         raise ValueError("an episode (suite, task, condition, seed) appears twice in one policy's records")
     common = sorted(set(a_by) & set(b_by))
     counts = {"both": 0, "only_a": 0, "only_b": 0, "neither": 0}
     for k in common:
-        ga, gb = got(a_by[k]), got(b_by[k])
+        ga, gb = bool(a_by[k][outcome]), bool(b_by[k][outcome])
         counts["both" if ga and gb else "only_a" if ga else "only_b" if gb else "neither"] += 1
     n = len(common)
     return {"pairs": n, **counts, "unpaired": len(a_by) + len(b_by) - 2 * n,

@@ -28,7 +28,9 @@ from importlib import metadata
 import numpy as np
 
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
+from ..observations import TCP_POSE, lookup
 from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
+from ..tasks.robot import base_frame_pose
 
 POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
 REMOTE_PREFIXES = ("ws://", "wss://")
@@ -185,9 +187,6 @@ def load_policy(spec: str) -> Policy:
 
 def _tcp_action(obs, closure: float) -> np.ndarray:
     """An action holding the TCP pose read from the observation (state_dict / rgb modes)."""
-    from ..observations import TCP_POSE, lookup
-    from ..tasks.robot import base_frame_pose
-
     try:
         pose = lookup(obs, TCP_POSE).reshape(-1)[:7]
     except (KeyError, TypeError):

@@ -5,11 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from ..fileio import atomic_write, atomic_write_json
 from ..physics.constants import CONTROL_FREQ
 from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
-from .metrics import deformation_ratio, group_summaries, is_dsr_success, percent, percent_ci, summarize
+from .metrics import deformation_ratio, group_summaries, percent, percent_ci, summarize
+from .runner import TERMINATIONS
 
 
 def _row(label: str, s: dict) -> str:
@@ -23,8 +25,6 @@ HEADER = ("| group | episodes | TSR % [95% CI] | DSR % [95% CI] | TSR-DSR | shar
 
 
 def _termination_table(per_suite: dict) -> list[str]:
-    from .runner import TERMINATIONS
-
     cols = list(TERMINATIONS) + sorted({k for s in per_suite.values() for k in s["terminations"]} - set(TERMINATIONS))
     lines = ["| group | " + " | ".join(cols) + " | tolerance violations | of them a tet collapsed |",
              "|---" * (len(cols) + 3) + "|"]
@@ -66,16 +66,12 @@ def rt_series(record: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def plot_traces(records: list[dict], out: Path) -> None:
     """R_t traces: successes within tolerance, successes beyond it, failures, coloured apart."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
     for r in records:
         if not r["deformation_trace"]:  # nothing measured (a worker died)
             continue
-        color = "tab:green" if is_dsr_success(r) else ("tab:red" if r["success"] else "0.6")
+        color = "tab:green" if r["dsr_success"] else ("tab:red" if r["success"] else "0.6")
         ax.plot(*rt_series(r), color=color, lw=0.8, alpha=0.8)
     ax.axhline(1.0, color="k", ls="--", lw=1)
     ax.plot([], [], color="tab:green", label="success, R_max <= 1, no tet collapsed")
@@ -86,21 +82,16 @@ def plot_traces(records: list[dict], out: Path) -> None:
     ax.legend(fontsize=7)
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, dpi=120))
-    plt.close(fig)
 
 
 def plot_ood_curves(records: list[dict], id_records: list[dict], out: Path) -> None:
     """TSR and DSR against each OOD factor's value, with the ID point at the nominal value."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     factors = {}
     for name, (key, value) in OOD_CONDITIONS.items():
         factors.setdefault(key, []).append((value, name))
     nominal = PhysicalFactors()
-    fig, axes = plt.subplots(1, len(factors), figsize=(4 * len(factors), 3.2), squeeze=False)
+    fig = Figure(figsize=(4 * len(factors), 3.2))
+    axes = fig.subplots(1, len(factors), squeeze=False)
     for ax, (key, pts) in zip(axes[0], factors.items()):
         xs, tsr, dsr = [], [], []
         for value, name in sorted(pts + [(getattr(nominal, key), "id")]):
@@ -119,4 +110,3 @@ def plot_ood_curves(records: list[dict], id_records: list[dict], out: Path) -> N
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, dpi=120))
-    plt.close(fig)

@@ -15,14 +15,12 @@ Every episode ends in a record, whatever the policy does; its ``termination`` sa
 A tet of a soft object in the scene that collapses or inverts (a fingertip pressing one node, a
 crushing grip) does not end the episode: the FEM recovers from it. ``collapsed_steps`` counts the
 states with one, and any makes the episode a tolerance violation (:func:`~.metrics.collapsed`).
-Records without ``collapsed_steps`` were made when the first collapse ended the episode as
-``sim_unstable``.
 
 Records go to a JSONL file, one line per finished episode, written by the main process only.
 Each carries the run's configuration (``policy``, ``obs_mode``, ``control_mode``, and for a
 trained policy file its ``policy_sha256``, so that a file retrained under the same name is
 another run) and
-``record_sha256``, a hash of everything but the wall time. A re-run with the same configuration
+``record_sha256``, a hash of everything but the wall time (:mod:`.records`). A re-run with the same configuration
 skips the episodes already there, after verifying every line, so an interrupted evaluation
 neither repeats nor loses an episode and an edited or corrupt record is refused with its file
 and line. Episodes run in worker processes, or as Ray tasks with ``ray_address`` (one env per
@@ -31,51 +29,27 @@ and line. Episodes run in worker processes, or as Ray tasks with ``ray_address``
 
 from __future__ import annotations
 
-import hashlib
 import json
+import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
 
-from ..version import __version__
-from ..fileio import append_jsonl, file_sha256, read_jsonl_lines
-from ..observations import info_bool
+import numpy as np
+
+from ..fileio import append_jsonl, file_sha256
+from ..observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
+from ..rollout import Observer, rollout
 from ..stack import software_stack
+from ..tasks.suites import get_suite
+from ..version import __version__
 from .protocols import episode_key
-from .run import RunConfig, recorded_camera_size, tactile_model
+from .records import read_records, seal
+from .run import RunConfig, tactile_model
+from .wrapper import make_env
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
-UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
-
-
-class RecordIntegrityError(ValueError):
-    """A stored record that is not what the evaluator wrote (edited, corrupt, or not a record)."""
-
-
-def record_hash(record: dict) -> str:
-    """SHA-256 of the record without its hash and wall time (canonical JSON)."""
-    body = {k: v for k, v in record.items() if k not in UNHASHED}
-    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
-
-
-def read_records(path: Path) -> list[dict]:
-    """The records of an evaluation log, each verified against its ``record_sha256``.
-
-    A torn last line (a writer killed mid-line) is dropped, as :func:`~mani_skill_softvt.fileio.read_jsonl_lines`
-    does; any other bad line raises :class:`RecordIntegrityError` naming the file and line.
-    """
-    out = []
-    for lineno, rec in read_jsonl_lines(path):
-        where = f"{path}:{lineno}"
-        if not isinstance(rec, dict) or "record_sha256" not in rec:
-            raise RecordIntegrityError(f"{where}: not an evaluation record (no record_sha256); "
-                                       "remove the line, or evaluate into another --out")
-        if rec["record_sha256"] != record_hash(rec):
-            raise RecordIntegrityError(f"{where}: the record does not match its record_sha256 (edited or corrupt); "
-                                       "remove the line to re-run that episode")
-        out.append(rec)
-    return out
 
 
 def run_records(path: Path, run: RunConfig) -> dict[tuple, dict]:
@@ -87,32 +61,15 @@ def run_records(path: Path, run: RunConfig) -> dict[tuple, dict]:
 
 
 def is_run_record(rec: dict, fields: dict, policy_sha256: str | None) -> bool:
-    return all(record_field(rec, k) == v for k, v in fields.items()) and \
+    return all(rec.get(k) == v for k, v in fields.items()) and \
         rec.get("policy_sha256", policy_sha256) == policy_sha256
-
-
-def record_field(rec: dict, key: str):
-    """A record's field; records from before the tactile model was kept have model 1, those from
-    before the camera size was kept had 224x224 cameras."""
-    if key == "tactile_model" and key not in rec:
-        return 1 if "tactile" in str(rec.get("obs_mode")) else None
-    if key == "camera_size" and key not in rec:
-        return recorded_camera_size(rec.get("obs_mode"), None)
-    return rec.get(key)
 
 
 def camera_size_of(env) -> list[int] | None:
     """(height, width) the env's cameras render at, None in obs modes without images."""
-    from ..observations import CAMERAS
-
     sensors = env.scene.sensors if "rgb" in env.obs_mode else {}
     cameras = [sensors[c] for c in CAMERAS if c in sensors]
     return [int(cameras[0].config.height), int(cameras[0].config.width)] if cameras else None
-
-
-def _seal(rec: dict) -> dict:
-    rec["record_sha256"] = record_hash(rec)
-    return rec
 
 
 def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None, policy_spec: str | None = None,
@@ -127,8 +84,6 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
     (:class:`~mani_skill_softvt.rollout.Observer`) watch the rollout without changing it: the
     cameras still render only where the policy reads them.
     """
-    from ..rollout import Observer, rollout
-
     class Callback(Observer):
         def on_reset(self, env, obs, info):
             on_step(obs, info)
@@ -172,7 +127,7 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
            "wall_s": None if wall_s is None else round(wall_s, 3), "receipt": receipt}
     if policy_sha256 is not None:
         rec["policy_sha256"] = policy_sha256
-    return _seal(rec)
+    return seal(rec)
 
 
 def worker_died_record(episode: dict, reason: str, run: RunConfig, rigid: bool) -> dict:
@@ -183,12 +138,10 @@ def worker_died_record(episode: dict, reason: str, run: RunConfig, rigid: bool) 
            "wall_s": None, "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack()}}
     if run.policy.sha256 is not None:  # kept only for policy files, as in run_episode
         rec["policy_sha256"] = run.policy.sha256
-    return _seal(rec)
+    return seal(rec)
 
 
 def _worker(batch: list[dict], run: RunConfig, queue) -> int:
-    from .wrapper import make_env
-
     policy = run.policy.load()  # a policy file is read once here, and checked against the run's hash
     # Every reset rebuilds the scene (SoftBodyEnv), so an episode is the same whichever ran before
     # it in this env, a blown-up one included: a resumed run and --reproduce match a full run.
@@ -214,8 +167,6 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same.
     """
-    from ..tasks.suites import get_suite
-
     out = Path(out)
     episodes = run.episodes() if episodes is None else episodes
     done = run_records(out, run)
@@ -284,8 +235,6 @@ def record_differences(stored: dict, new: dict) -> list[str]:
 def relative_difference(a, b) -> float | None:
     """The largest relative difference between two numbers or two equally long lists of numbers
     (a field that differs only by rounding, on another machine, say); None for anything else."""
-    import numpy as np
-
     if isinstance(a, (bool, str, dict)) or isinstance(b, (bool, str, dict)) or a is None or b is None:
         return None
     try:
@@ -301,7 +250,7 @@ def single_run(records: list[dict], path: Path) -> str | None:
     """Check that ``records`` (of ``path``) are of one run (policy, modes, camera size, policy
     file) and hold each episode once; the run's policy file hash (None for other policies)."""
     # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
-    runs = {json.dumps([record_field(r, k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
+    runs = {json.dumps([r.get(k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
     hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
     if len(runs) > 1 or len(hashes) > 1:
         raise ValueError(f"{path} holds records of {max(len(runs), len(hashes))} run configurations (policy, modes, "
@@ -320,8 +269,6 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
 
     Refuses before running anything if the file holds several runs, or if the policy file is not
     the one the records were made with (its ``policy_sha256``)."""
-    import tempfile
-
     path = Path(path)
     records = read_records(path)
     if not records:

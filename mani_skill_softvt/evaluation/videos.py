@@ -15,10 +15,15 @@ import warnings
 from pathlib import Path
 
 import cv2
+import imageio
 import numpy as np
 
 from ..fileio import atomic_write
 from ..observations import CAMERAS, SIDES, camera_key, lookup, tactile_key
+from ..tasks import constants as C
+from ..tasks.suites import get_suite
+from .runner import run_episode
+from .wrapper import make_env
 
 FPS = 20  # the control rate: one frame per env step plays in real time
 STRIP_HEIGHT = 112
@@ -215,11 +220,6 @@ def record_episode_video(episode: dict, run, path, obs_mode: str = "rgb+tactile"
     version). ``max_steps`` truncates the episode (short previews, tests). The cameras render at the
     run's camera size, as in its evaluation.
     """
-    from ..tasks import constants as C
-    from ..tasks.suites import get_suite
-    from .runner import run_episode
-    from .wrapper import make_env
-
     missing = [k for k in ("suite", "task_id", "condition", "seed") if k not in episode]
     if missing:
         raise ValueError(f"episode lacks {missing}: pass an evaluation record or a protocols.episodes() entry")
@@ -229,7 +229,6 @@ def record_episode_video(episode: dict, run, path, obs_mode: str = "rgb+tactile"
     if max_steps is not None and max_steps < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     _require_ffmpeg()
-    import imageio
 
     horizon = max_steps or C.MAX_EPISODE_STEPS
     limit = {"max_episode_steps": max_steps} if max_steps else {}

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from ..observations import info_bool
+from .. import tasks  # noqa: F401  (registers the envs)
+from ..observations import camera_sensor_configs, info_bool
 from ..tasks.suites import get_suite
 from .metrics import deformation_ratio, dsr_success
 
@@ -68,9 +69,6 @@ def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=None
     control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``; its calibration card
     is read from ``calibration_dir`` (default: the package's cards). ``camera_size`` = (height,
     width) renders the two policy cameras at that size (:func:`~mani_skill_softvt.observations.camera_sensor_configs`)."""
-    from .. import tasks  # noqa: F401  (registers the envs)
-    from ..observations import camera_sensor_configs
-
     if calibration_dir is not None:  # only then: recorded env kwargs stay free of machine paths
         kwargs["calibration_dir"] = str(calibration_dir)
     sized = camera_sensor_configs(camera_size)

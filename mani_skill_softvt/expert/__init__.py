@@ -1,1 +1,2 @@
-"""The scripted expert: pick-and-place waypoints (pick_place) joined by mplib motion planning (planner)."""
+"""Scripted policies: the pick-and-place expert (pick_place waypoints joined by mplib motion
+planning, planner) and the calibration's grasp-lift-hold script (grasp_script)."""

@@ -23,6 +23,7 @@ import numpy as np
 from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, rotvec_to_quat, yaw_between
 from ..tasks import constants as C
 from ..tasks.robot import ee_action, mid_height_grasp
+from .planner import MotionPlanner, PlanningError, held_object, plan_expert_path
 
 PHASE_STEPS = {"approach": 15, "descend": 15, "close": 12, "lift": 15, "transport": 25, "lower": 15,
                "release": 8, "retreat": 10, "wait": 10}
@@ -86,8 +87,6 @@ def plan_pick_place(env, closure: float, planner: str = DEFAULT_PLANNER, strict:
     ]
     plan = ExpertPlan(g, [(p, np.asarray(t, np.float64), gg, yaw) for p, t, gg in wp], planner)
     if planner == "mplib":
-        from .planner import PlanningError, held_object, plan_expert_path
-
         held = held_object(nodes, [*xy, grasp_z], yaw)
         try:
             segments = plan_expert_path(env, plan.waypoints, PHASE_STEPS, held)
@@ -145,7 +144,6 @@ def joint_actions(env, plan: ExpertPlan):
             for q in seg.qpos:
                 yield phase, np.concatenate([q, [g]]).astype(np.float32)
         return
-    from .planner import MotionPlanner
 
     mp = MotionPlanner(env)
     q = env.unwrapped.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)[mp.arm]

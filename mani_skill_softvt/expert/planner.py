@@ -20,7 +20,9 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
+from ..assets import load_prop
 from ..physics.transforms import down_quat, quat_angle, quat_conjugate, quat_multiply, quat_wxyz_to_matrix
 from ..tasks import constants as C
 
@@ -88,15 +90,11 @@ def box_obstacle(name: str, lo, hi) -> Obstacle:
 
 def _halfspaces(points: np.ndarray):
     """(A, b) with the convex hull of ``points`` = {x : A x <= b}."""
-    from scipy.spatial import ConvexHull
-
     eq = ConvexHull(points).equations  # rows (n, d): n . x + d <= 0 inside
     return eq[:, :3], -eq[:, 3]
 
 
 def _hull(points: np.ndarray):
-    from scipy.spatial import ConvexHull
-
     h = ConvexHull(points)
     used = np.unique(h.simplices)
     remap = -np.ones(len(points), np.int64)
@@ -111,8 +109,6 @@ def scene_obstacles(env, exclude=None) -> list[Obstacle]:
     The table top, the target prop's convex parts at its current pose, and the convex hull of
     every soft instance but ``exclude`` (default: the instructed one, which the gripper grasps).
     """
-    from ..assets import load_prop
-
     u = env.unwrapped
     exclude = u.target_instance if exclude is None else exclude
     he = np.asarray(C.TABLE_HALF_EXTENTS)
@@ -136,7 +132,7 @@ class MotionPlanner:
                  rrt_tries: int = RRT_TRIES):
         if not MPLIB_PLANS:
             raise PlanningError(MPLIB_UNAVAILABLE)
-        import mplib
+        import mplib  # here, not at the top: under NumPy 2 importing it can crash the process (MPLIB_PLANS)
 
         self.rrt_tries = int(rrt_tries)
         u = env.unwrapped
@@ -165,7 +161,7 @@ class MotionPlanner:
 
     # -------------------------------------------------------- scene
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
-        from mplib.pymp.collision_detection import fcl
+        from mplib.pymp.collision_detection import fcl  # mplib: imported only where it plans (above)
 
         for name in self.mp.planning_world.get_normal_object_names():
             self.mp.remove_normal_object(name)

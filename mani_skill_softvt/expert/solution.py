@@ -18,7 +18,10 @@ motion-planning format) or ``pd_ee_pose`` (the paper's absolute TCP pose), eithe
 
 from __future__ import annotations
 
+from ..rollout import Observer, rollout
 from .pick_place import DEFAULT_PLANNER
+from .planner import PlanningError
+from .policy import ScriptedExpertPolicy
 
 
 SOURCE_DESC = ("mani_skill_softvt scripted expert (mani_skill_softvt.expert.solution.solve): mplib joint paths "
@@ -37,10 +40,6 @@ def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = Non
     ``strict``) or "cartesian". The closure and the planner that produced the plan go to the
     recorder's episode metadata when ``env`` is a :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`.
     """
-    from ..rollout import Observer, rollout
-    from .planner import PlanningError
-    from .policy import ScriptedExpertPolicy
-
     class Show(Observer):
         def on_step(self, env, action, obs, info):
             env.unwrapped.render_human()

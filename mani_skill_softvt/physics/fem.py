@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..paths import WARP_CACHE_DIR
 from ..assets.materials import SoftMaterial  # noqa: F401  (the material type lives with the assets' materials)
+from ..paths import WARP_CACHE_DIR
 from . import constants as C
 from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, box_gap, is_quiet, local_bounds, world_boxes
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
@@ -472,12 +472,19 @@ class SoftBodyWorld:
         new_q = getattr(self, "_pending_q", self._collider_q)
         disturbed = self._disturbed(new_q) if self.sleeping else np.zeros(len(self.soft_bodies), bool)
         if self.asleep and not disturbed.any():
-            self._collider_q = new_q
-            self._pending_q = new_q
-            self.time += self.dt
-            self.sleep_stats["ticks_asleep"] += 1
+            self._end_tick(new_q, "ticks_asleep")
             return self._sleep_wrench.copy()
         self._set_asleep(self._asleep & ~disturbed)
+        self._simulate_tick(new_q)
+        self._end_tick(new_q, "ticks_simulated")
+        w = self.body_wrench.numpy()[self._collider_bodies].astype(np.float64) / self.substeps
+        if self.sleeping:
+            self._count_quiet_ticks(disturbed, w)
+        return w
+
+    def _simulate_tick(self, new_q: np.ndarray) -> None:
+        """One simulated tick with the colliders moving from their poses to ``new_q``: through the
+        captured graph where there is one (the simulation itself is :meth:`_simulate`)."""
         qd = np.zeros((len(new_q), 6), np.float32)
         qd[:, :3] = (new_q[:, :3] - self._collider_q[:, :3]) / self.dt  # Newton: linear first
         qd[:, 3:] = angular_velocity_xyzw(self._collider_q[:, 3:], new_q[:, 3:], self.dt)
@@ -487,30 +494,33 @@ class SoftBodyWorld:
         self.state_out.body_qd.assign(qd)
         if self._graph is not None:
             wp.capture_launch(self._graph)
-        else:
-            self._simulate()
-            if self.use_graph:
-                # Capture after one uncaptured tick (the solver sizes its contact buffers on the
-                # first step). CPU capture records without executing, so no tick is run twice.
-                with wp.ScopedCapture(device=self.device) as cap:
-                    self._simulate()
-                self._graph = cap.graph
+            return
+        self._simulate()
+        if self.use_graph:
+            # Capture after one uncaptured tick (the solver sizes its contact buffers on the
+            # first step). CPU capture records without executing, so no tick is run twice.
+            with wp.ScopedCapture(device=self.device) as cap:
+                self._simulate()
+            self._graph = cap.graph
+
+    def _end_tick(self, new_q: np.ndarray, stat: str) -> None:
         self._collider_q = new_q
         self._pending_q = new_q
         self.time += self.dt
-        self.sleep_stats["ticks_simulated"] += 1
-        w = self.body_wrench.numpy()[self._collider_bodies].astype(np.float64) / self.substeps
-        if self.sleeping:
-            qd = self.state_in.particle_qd.numpy().astype(np.float64)
-            for i, h in enumerate(self.soft_bodies):
-                if self._asleep[i]:
-                    continue
-                v = qd[h.particle_start : h.particle_start + h.particle_count]
-                self._quiet[i] = self._quiet[i] + 1 if is_quiet(float(np.sqrt((v**2).sum(1).max())), disturbed[i]) else 0
-            self._set_asleep(self._asleep | (self._quiet >= SLEEP_TICKS))
-            if self.asleep:
-                self._sleep_wrench = w.copy()
-        return w
+        self.sleep_stats[stat] += 1
+
+    def _count_quiet_ticks(self, disturbed: np.ndarray, wrench: np.ndarray) -> None:
+        """The sleep rule after a simulated tick: count each awake body's quiet ticks, put to sleep
+        those quiet long enough, and keep the wrench a tick of all-asleep bodies returns."""
+        qd = self.state_in.particle_qd.numpy().astype(np.float64)
+        for i, h in enumerate(self.soft_bodies):
+            if self._asleep[i]:
+                continue
+            v = qd[h.particle_start : h.particle_start + h.particle_count]
+            self._quiet[i] = self._quiet[i] + 1 if is_quiet(float(np.sqrt((v**2).sum(1).max())), disturbed[i]) else 0
+        self._set_asleep(self._asleep | (self._quiet >= SLEEP_TICKS))
+        if self.asleep:
+            self._sleep_wrench = wrench.copy()
 
     # ------------------------------------------------------------------ state access
     def particle_q(self, body: int | SoftBodyHandle = 0) -> np.ndarray:

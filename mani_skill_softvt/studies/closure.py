@@ -24,9 +24,23 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from tqdm import tqdm
 
+from ..baselines.agent import GRIPPER
+from ..data.seeds import ID_EPISODES_PER_TASK
+from ..evaluation.protocols import episode_key
+from ..evaluation.report import rt_series
+from ..evaluation.run import RunConfig, policy_tag
+from ..evaluation.runner import record_differences, run_episode, run_records
+from ..evaluation.wrapper import make_env
+from ..expert.pick_place import draw_closure
 from ..fileio import atomic_write, atomic_write_json
+from ..observations import info_bool
+from ..parallel import run_tasks
+from ..physics.constants import CONTROL_FREQ
 from ..rollout import Observer
+from ..tasks.suites import NUM_TASKS
 
 
 def held_chunks(closure, held, chunk: int) -> np.ndarray:
@@ -61,8 +75,6 @@ class ClosureLog(Observer):
         self.held: list[bool] = []
 
     def on_step(self, env, action, obs, info):
-        from ..observations import info_bool
-
         self.closure.append(float(np.asarray(action)[self.gripper_column]))
         self.held.append(info_bool(info, "is_grasped"))
 
@@ -70,11 +82,6 @@ class ClosureLog(Observer):
 def _run(run, episodes: list[dict], queue) -> list[dict]:
     """A worker: each episode of ``run`` (a :class:`~mani_skill_softvt.evaluation.run.RunConfig`) as
     the evaluator runs it, with its closure log."""
-    from ..evaluation.runner import run_episode
-    from ..evaluation.wrapper import make_env
-    from ..expert.pick_place import draw_closure
-    from ..baselines.agent import GRIPPER
-
     policy = run.policy.load()
     env = make_env(episodes[0]["suite"], episodes[0]["task_id"], obs_mode=run.obs_mode, control_mode=run.control_mode,
                    camera_size=run.camera_size)
@@ -102,16 +109,8 @@ def summary_rows(episodes: list[dict], chunk: int) -> list[dict]:
 
 def plot(results: dict[str, list[dict]], task: int, out: Path) -> None:
     """Closure (top) and R_t (bottom) over time, one column per policy, one colour per seed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..evaluation.report import rt_series
-    from ..physics.constants import CONTROL_FREQ
-
-    fig, axes = plt.subplots(2, len(results), figsize=(4.6 * len(results), 5.8), squeeze=False, sharex=True,
-                             sharey="row")
+    fig = Figure(figsize=(4.6 * len(results), 5.8))
+    axes = fig.subplots(2, len(results), squeeze=False, sharex=True, sharey='row')
     for col, (name, episodes) in enumerate(results.items()):
         top, bottom = axes[0][col], axes[1][col]
         for i, e in enumerate(episodes):
@@ -129,13 +128,9 @@ def plot(results: dict[str, list[dict]], task: int, out: Path) -> None:
     axes[0][0].legend(fontsize=6, title="seed", title_fontsize=6, loc="lower right")
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
-    plt.close(fig)
 
 
 def main(argv=None) -> dict:
-    from ..data.seeds import ID_EPISODES_PER_TASK
-    from ..tasks.suites import NUM_TASKS
-
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("policies", nargs="+", help="trained policy files (a run's policy.pt or an exported .pt)")
     ap.add_argument("--task", type=int, default=3, help="Object-Soft task (default 3, the soft cube)")
@@ -148,9 +143,6 @@ def main(argv=None) -> dict:
         ap.error(f"--task must be in [0, {NUM_TASKS - 1}], got {args.task}")
     if not 1 <= args.episodes <= ID_EPISODES_PER_TASK:
         ap.error(f"--episodes must be in [1, {ID_EPISODES_PER_TASK}] (the ID protocol's seeds), got {args.episodes}")
-    from ..evaluation.protocols import episode_key
-    from ..evaluation.run import RunConfig, policy_tag
-    from ..evaluation.runner import record_differences, run_records
     runs = {}
     for spec in args.policies:
         if not spec.endswith(".pt") or not Path(spec).is_file():
@@ -164,9 +156,6 @@ def main(argv=None) -> dict:
         if policy_tag(spec) in runs:
             ap.error(f"two policies are named {policy_tag(spec)}; give each once, from differently named files")
         runs[policy_tag(spec)] = run
-    from tqdm import tqdm
-
-    from ..parallel import run_tasks
 
     eps = next(iter(runs.values())).episodes()
     items = [(run, eps) for run in runs.values()]

@@ -32,11 +32,13 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from ..evaluation.metrics import paired_comparison, percent, percent_ci, summarize
-from ..evaluation.runner import read_records, single_run
+from ..evaluation.records import read_records
+from ..evaluation.runner import single_run
 from ..fileio import atomic_write, atomic_write_json
-from ..tasks.suites import OOD_CONDITIONS
+from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
 from .results import variant_of
 
 # The paper's per-condition OOD table for Diffusion Policy on Object-Soft (TSR, DSR %; 100 episodes each),
@@ -203,18 +205,12 @@ def build(result: dict) -> str:
 def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
                 twins_from: dict[str, list[dict]] | None = None) -> None:
     """TSR and DSR against each factor's value, one line per variant, the ID twins at nominal."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..tasks.suites import PhysicalFactors
-
     factors = defaultdict(list)
     for name, (key, value) in OOD_CONDITIONS.items():
         factors[key].append((value, name))
     nominal = PhysicalFactors()
-    fig, axes = plt.subplots(2, len(factors), figsize=(4.2 * len(factors), 6), squeeze=False, sharey=True)
+    fig = Figure(figsize=(4.2 * len(factors), 6))
+    axes = fig.subplots(2, len(factors), squeeze=False, sharey=True)
     for col, (key, pts) in enumerate(factors.items()):
         for j, (variant, (ood, id_records)) in enumerate(runs.items()):
             twins = id_twins(ood, (twins_from or {}).get(variant, id_records))
@@ -237,7 +233,6 @@ def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
-    plt.close(fig)
 
 
 def main(argv=None) -> dict:

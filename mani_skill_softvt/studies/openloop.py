@@ -19,19 +19,20 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from ..baselines.agent import GRIPPER, executed_actions, load_policy_file
+from ..baselines.dataset import DemoWindows, load_windows
+from ..baselines.model import noise_scheduler
+from ..baselines.train import CACHE
 from ..fileio import atomic_write_json
 from ..paths import DEMOS_DIR
-from ..baselines.agent import GRIPPER, executed_actions
-from ..baselines.dataset import DemoWindows, load_windows
 
 
 def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
     """Per action of (..., 7) base-frame actions (xyz, axis-angle, closure): the position error (m),
     the angle of the rotation between the two orientations (rad) and the closure error."""
-    from scipy.spatial.transform import Rotation
-
     pred, target = np.asarray(pred, np.float64), np.asarray(target, np.float64)
     shape = pred.shape[:-1]
     rel = Rotation.from_rotvec(pred[..., 3:6].reshape(-1, 3)).inv() * Rotation.from_rotvec(target[..., 3:6].reshape(-1, 3))
@@ -54,8 +55,6 @@ def chunk_errors(model, windows: DemoWindows, indices: np.ndarray, seed: int = 0
     """:func:`action_errors` of the actions the agent would execute (the first ``action_steps`` of
     each chunk the model denoises at ``indices``, its gripper column as the agent sends it) against
     the demonstrated ones; arrays (len(indices), action_steps)."""
-    from ..baselines.model import noise_scheduler
-
     cfg = model.cfg
     scheduler = noise_scheduler(cfg, inference=True)
     generator = torch.Generator().manual_seed(seed)
@@ -87,8 +86,6 @@ def run_dir_of(policy_path: Path) -> Path:
 def load_run_windows(cfg, run: Path, demos_root: Path, cache: Path | None = None) -> tuple[DemoWindows, DemoWindows]:
     """The held-out and training windows of the run in ``run``, through the data cache ``cache``
     (default: the run's own, ``<run>/data_cache``)."""
-    from ..baselines.train import CACHE
-
     cache = Path(run) / CACHE if cache is None else cache
     return load_windows(cfg, demos_root, cache, heldout=True), load_windows(cfg, demos_root, cache)
 
@@ -99,8 +96,6 @@ def openloop(policy_path: Path, demos_root: Path = DEMOS_DIR, limit: int = 500, 
     """Held-out and training open-loop errors of a ``policy.pt`` or a snapshot (see the module
     docstring); ``write`` puts them in ``openloop.json`` beside it. ``windows``: the run's
     (held-out, training) windows when the caller has them (several snapshots of one run)."""
-    from ..baselines.agent import load_policy_file
-
     policy_path = Path(policy_path)
     cfg, model, ckpt = load_policy_file(policy_path)
     if cfg.heldout_per_task < 1:

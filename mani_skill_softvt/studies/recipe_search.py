@@ -30,14 +30,26 @@ both against training time (the chosen recipe's curve of TSR against training ti
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import os
 import time
 from pathlib import Path
 
-from ..evaluation.metrics import percent_ci
-from ..fileio import append_jsonl, read_jsonl
-from ..paths import DEMOS_DIR, REPO_DIR
+from matplotlib.figure import Figure
+from tqdm import tqdm
+
+from ..baselines.agent import read_policy_file, resolve_policy_file
 from ..baselines.config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
+from ..baselines.train import POLICY, save, snapshot_path, train
+from ..evaluation.metrics import percent_ci, summarize
+from ..evaluation.protocols import episode_key
+from ..evaluation.records import read_records
+from ..evaluation.run import RunConfig
+from ..evaluation.runner import evaluate
+from ..fileio import append_jsonl, atomic_write, read_jsonl
+from ..paths import DEMOS_DIR, REPO_DIR
+from .openloop import load_run_windows, openloop
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
@@ -85,9 +97,6 @@ def measured(variant: str, results_dir: Path = RESULTS_DIR) -> dict[tuple[str, i
 def run_id(cfg, data_key: str) -> str:
     """A run's identity in the results: its config and the episodes it trained on (another
     --demos-per-task, --heldout or an edited recipe is another run)."""
-    import hashlib
-    import json
-
     return hashlib.sha256(json.dumps([cfg.to_dict(), data_key], default=list).encode()).hexdigest()[:12]
 
 
@@ -100,9 +109,6 @@ def measure_snapshots(variant: str, recipe: str, run: Path, cfg, demos_root: Pat
                       threads: int, cache: Path | None = None) -> list[dict]:
     """Log the open-loop error of every snapshot of the run of ``cfg`` in ``run`` not yet logged;
     the new lines. The run's data is read once for all its snapshots."""
-    from ..baselines.agent import read_policy_file
-    from .openloop import load_run_windows, openloop
-
     done = measured(variant, results_dir)
     todo = run_snapshots(run)
     if not todo:
@@ -127,9 +133,6 @@ def derive_snapshots(source: Path, run: Path, cfg) -> int:
     ``cfg`` only in :data:`~.config.INFERENCE_FIELDS`: the same weights, sampled as ``cfg`` says.
     Training it would give those weights bit for bit; this costs seconds. Returns how many files
     were written (those already there are kept)."""
-    from ..baselines.agent import read_policy_file
-    from ..baselines.train import POLICY, save, snapshot_path
-
     snaps = run_snapshots(source)
     if snaps and training_identity(read_policy_file(snaps[0])[0]) != training_identity(cfg):
         raise ValueError(f"{source} trains otherwise than {run} would; it cannot stand in for it")
@@ -154,12 +157,6 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
     """Evaluate the run's snapshots (of ``steps``, default all) on the ID protocol, ``per_task``
     episodes of each of ``tasks`` (default all), resuming; the summaries of every evaluated
     snapshot (:func:`closed_loop_summaries`)."""
-    from tqdm import tqdm
-
-    from ..evaluation.run import RunConfig
-    from ..evaluation.runner import evaluate
-    from ..baselines.agent import resolve_policy_file
-
     every = run_snapshots(run)
     if not every:
         raise ValueError(f"{run} has no snapshots to evaluate; train it first (the same command without --closed-loop)")
@@ -181,10 +178,6 @@ def evaluate_snapshots(run: Path, per_task: int, steps: list[int] | None, worker
 def closed_loop_summaries(results_dir: Path = RESULTS_DIR) -> dict[tuple[str, int], dict]:
     """TSR and DSR (with Wilson intervals) of every evaluated snapshot, by (run, step); an episode
     evaluated twice (the snapshot file moved, so another policy path) counts once, its last record."""
-    from ..evaluation.metrics import summarize
-    from ..evaluation.protocols import episode_key
-    from ..evaluation.runner import read_records
-
     out = {}
     for path in sorted(Path(results_dir).glob("closed_loop/*/*.jsonl")):
         records = list({episode_key(r): r for r in read_records(path)}.values())
@@ -222,15 +215,10 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
     rows = list(measured(variant, results_dir).values())
     if not rows:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..fileio import atomic_write
 
     closed = closed_loop_summaries(results_dir) if closed is None else closed
-    fig, (ax_err, ax_tsr) = plt.subplots(1, 2, figsize=(11, 4))
+    fig = Figure(figsize=(11, 4))
+    (ax_err, ax_tsr) = fig.subplots(1, 2)
     for i, run in enumerate(sorted({r["run"] for r in rows})):
         mine = sorted((r for r in rows if r["run"] == run), key=lambda r: r["step"])
         label, color = f"{mine[0]['recipe']} ({run[:6]})", f"C{i % 10}"  # one colour per run in both panels
@@ -255,13 +243,10 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
     fig.tight_layout()
     path = Path(results_dir) / f"{variant}.png"
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
-    plt.close(fig)
     return path
 
 
 def main(argv=None) -> str:
-    from ..baselines.train import train
-
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.recipe_search", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", default="vo-c", choices=VARIANTS)

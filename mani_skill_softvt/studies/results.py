@@ -25,11 +25,15 @@ import argparse
 import itertools
 from pathlib import Path
 
-from ..evaluation.metrics import group_summaries, is_dsr_success, paired_comparison, percent, percent_ci, summarize
+from matplotlib.figure import Figure
+
+from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
+from ..evaluation.protocols import episode_key
+from ..evaluation.records import read_records
 from ..evaluation.report import rt_series
 from ..evaluation.run import policy_tag
-from ..evaluation.runner import read_records
 from ..fileio import atomic_write, atomic_write_json
+from ..tasks.suites import task_spec
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
 # variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
@@ -81,8 +85,6 @@ def is_legacy(key: tuple[str, str, str]) -> bool:
 def grouped(records: list[dict], legacy: list[dict] = ()) -> dict[tuple[str, str, str], list[dict]]:
     """Records by (suite, condition, row label), today's first, the legacy rows marked. An
     episode twice in one row (overlapping files, say) is an error, not a double count."""
-    from ..evaluation.protocols import episode_key
-
     groups: dict[tuple[str, str, str], list[dict]] = {}
     for recs, old in ((records, False), (list(legacy), True)):
         for r, label in zip(recs, group_labels(recs, old)):
@@ -100,8 +102,6 @@ def per_task_lines(groups: dict) -> list[str]:
     """Per suite of today's rows, TSR / DSR (%) of each task (with its object), one column per
     variant (and protocol, where there are several); none for legacy rows, whose per-task tables
     sit beside their records."""
-    from ..tasks.suites import task_spec
-
     lines = []
     for suite in sorted({k[0] for k in groups if not is_legacy(k)}):
         keys = sorted(k for k in groups if k[0] == suite and not is_legacy(k))
@@ -151,17 +151,14 @@ def plot_success_traces(groups: dict, out: Path) -> Path | None:
     if not today:
         Path(out).unlink(missing_ok=True)
         return None
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(today), figsize=(4.2 * len(today), 3.4), squeeze=False, sharey=True)
+    fig = Figure(figsize=(4.2 * len(today), 3.4))
+    axes = fig.subplots(1, len(today), squeeze=False, sharey=True)
     peak = max(r["r_max"] for _, recs in today for r in recs)
     for ax, ((suite, condition, label), recs) in zip(axes[0], today):
-        within = sum(is_dsr_success(r) for r in recs)
-        for r in sorted(recs, key=lambda r: not is_dsr_success(r)):  # the fewer red ones on top
-            ax.plot(*rt_series(r), lw=0.6, alpha=0.35, color="tab:green" if is_dsr_success(r) else "tab:red")
+        within = sum(r["dsr_success"] for r in recs)
+        for r in sorted(recs, key=lambda r: not r["dsr_success"]):  # the fewer red ones on top
+            ax.plot(*rt_series(r), lw=0.6, alpha=0.35, color="tab:green" if r["dsr_success"] else "tab:red")
         ax.axhline(1.0, color="k", ls="--", lw=1)
         ax.set_title(f"{label}\n{suite} {condition}: {within} of {len(recs)} successes within tolerance", fontsize=8)
         ax.set_xlabel("time (s)")
@@ -172,7 +169,6 @@ def plot_success_traces(groups: dict, out: Path) -> Path | None:
     axes[0][0].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
-    plt.close(fig)
     return out
 
 

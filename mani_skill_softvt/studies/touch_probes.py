@@ -28,19 +28,16 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 from tqdm import tqdm
 
+from ..data.demo_set import DemoSet
 from ..data.images import resize_image
+from ..data.trajectory import episode_digest, open_h5, rendering_current
 from ..fileio import atomic_write, atomic_write_json
-from ..observations import (
-    CAMERAS,
-    MARKER_FIELDS,
-    SIDES,
-    TCP_POSE,
-    camera_key,
-    tactile_key,
-)
+from ..observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
 from ..paths import DEMOS_DIR, REPO_DIR
+from ..tasks.suites import NUM_TASKS
 
 SLIP_SPEED = 1e-3  # m/s: an object moving 0.05 mm per 50-ms step relative to the fingers slips
 CONTACT_FORCE = 0.05  # N on each pad: both pads press on the object
@@ -169,9 +166,6 @@ def load_frames(demos_root: Path, suite: str, tasks: list[int], camera_size, hel
     """Every frame of the rendered demos, with a ``heldout`` flag (the last demos of each task) and
     the episode index (for the validation split). Only episodes whose rendering is current are
     read (a demo set still being rendered has fewer); ``skipped`` counts the others."""
-    from ..data.demo_set import DemoSet
-    from ..data.trajectory import episode_digest, open_h5, rendering_current
-
     demo_set = DemoSet(demos_root, suite)
     sources = demo_set.rendered_sources(tasks, "rgb+tactile", camera_size)
     out: dict[str, list] = {}
@@ -278,14 +272,10 @@ def format_result(result: dict) -> str:
 
 
 def plot_result(result: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     measures = [("force", "r2_contact", "force R² (contact)"), ("r_t", "r2_contact", "R_t R² (contact)"),
                 ("slip", "auc", "slip AUC")]
-    fig, ax = plt.subplots(figsize=(6.5, 3.2))
+    fig = Figure(figsize=(6.5, 3.2))
+    ax = fig.subplots()
     width = 0.25
     for i, inputs in enumerate(INPUTS):
         vals = [result["probes"][inputs][t][m] for t, m, _ in measures]
@@ -297,13 +287,9 @@ def plot_result(result: dict, path: Path) -> None:
     ax.legend(fontsize=8, loc="lower center", ncol=3, framealpha=0.9)
     fig.tight_layout()
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
-    plt.close(fig)
 
 
 def main(argv=None) -> dict:
-    from ..observations import parse_image_size
-    from ..tasks.suites import NUM_TASKS
-
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.touch_probes", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR)

@@ -18,9 +18,11 @@ is ~2 mm thick, so the camera's perspective over the indentation is negligible).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from . import constants as C
+from .gel import geometric_indentation
 
 # Barycentric slack so pixel centres exactly on a shared edge are painted by both triangles
 # (no cracks between neighbours); the z-buffer keeps the deeper one.
@@ -73,8 +75,6 @@ def heightmap_from_triangles(vertices: np.ndarray, faces: np.ndarray, width: int
     The gap map (:func:`gap_from_triangles`) of what reaches past the gel plane, as the gel
     takes it when the pose is prescribed: ``clip(-z_min, 0, max_penetration)``.
     """
-    from .gel import geometric_indentation  # the gel model builds on this module's rasteriser
-
     return geometric_indentation(gap_from_triangles(vertices, faces, 0.0, width, height, pixel), max_penetration)
 
 
@@ -225,8 +225,6 @@ def polygon_area(xy: np.ndarray) -> float:
 def polygons_mask(polygons: list[np.ndarray], width: int = C.IMAGE_WIDTH, height: int = C.IMAGE_HEIGHT,
                   pixel: float = C.PIXEL_SIZE) -> np.ndarray:
     """Boolean (H, W): pixel centres inside any of the pad-frame polygons (OpenCV's scan fill)."""
-    import cv2
-
     mask = np.zeros((height, width), np.uint8)
     shift = 4  # 1/16 px fixed point
     for xy in polygons:

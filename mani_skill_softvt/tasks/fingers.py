@@ -7,6 +7,8 @@ functions; the env only wires them up.
 from __future__ import annotations
 
 import numpy as np
+import trimesh
+from mani_skill import PACKAGE_ASSET_DIR
 
 from ..physics.transforms import pose_wxyz_to_matrix
 from ..observations import SIDES
@@ -78,9 +80,6 @@ def hand_collision_hull() -> tuple[np.ndarray, np.ndarray]:
     """Convex hull of the Panda hand's collision mesh (from the ManiSkill wheel), hand frame."""
     global _HAND_HULL
     if _HAND_HULL is None:
-        import trimesh
-        from mani_skill import PACKAGE_ASSET_DIR
-
         m = trimesh.load(f"{PACKAGE_ASSET_DIR}/robots/panda/franka_description/meshes/collision/hand.stl", force="mesh")
         hull = m.convex_hull
         _HAND_HULL = (np.asarray(hull.vertices), np.asarray(hull.faces))

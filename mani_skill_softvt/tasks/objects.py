@@ -18,6 +18,7 @@ import sapien
 import torch
 from mani_skill.utils.common import to_numpy
 
+from ..assets.cards import read_obj
 from ..assets.materials import SoftMaterial
 from ..assets.tetmesh import embed_points, surface_of_tets, vertex_normals
 from ..physics import constants as PC
@@ -53,8 +54,6 @@ class ObjectSpec:
     @classmethod
     def from_card(cls, name: str, card) -> "ObjectSpec":
         """Spec of an asset card (soft object or rigid twin)."""
-        from ..assets.cards import read_obj
-
         v, t = card.tet_mesh()
         if card.rigid:
             # The twin's body frame rests it on a stable face (card.rest_pose); its nodes follow.
@@ -422,10 +421,10 @@ class FEMObjects(SceneObjects):
         w = self.world
         n_p, n_b, n_c = w.model.particle_count, w.model.body_count, len(w.colliders)
         sizes = [n_p * 3, n_p * 3, n_b * 7, n_c * 6, 2 * len(w.soft_bodies)]
-        if vec.size == sum(sizes[:-1]):  # recorded before soft bodies could sleep: awake
-            vec = np.concatenate([vec, np.zeros(sizes[-1])])
         if vec.size != sum(sizes):
-            raise ValueError(f"soft-body state has {vec.size} values, this scene needs {sum(sizes)}")
+            before_sleep = " (recorded before soft bodies could sleep, without their sleep state: record " \
+                "the demos again)" if vec.size == sum(sizes[:-1]) else ""
+            raise ValueError(f"soft-body state has {vec.size} values, this scene needs {sum(sizes)}{before_sleep}")
         q, qd, cq, wr, sleep = np.split(vec, np.cumsum(sizes)[:-1])
         wr = wr.reshape(n_c, 6).copy()
         w.set_state({"particle_q": q.reshape(-1, 3), "particle_qd": qd.reshape(-1, 3), "collider_q": cq.reshape(-1, 7),

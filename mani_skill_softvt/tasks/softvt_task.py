@@ -59,10 +59,11 @@ from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
 
 from ..assets import load_card, load_prop
+from ..calibration.cards import load_calibration_card
 from ..paths import CALIBRATION_DIR
 from . import constants as C
 from . import rewards
-from .soft_body_env import PropCollider, SoftBodyEnv, ObjectSpec
+from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
 from .suites import SUITES, TaskSpec, task_spec
 
 OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
@@ -209,8 +210,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         its envelope and tau_o. Loaded once, on first use, so that an env nobody scores needs no card;
         the DSR scorer, the expert and the dense reward all read this one."""
         if self._calibration_card is None:
-            from ..calibration.cards import load_calibration_card
-
             self._calibration_card = load_calibration_card(self.task.soft_asset_id, self.calibration_dir)
         return self._calibration_card
 

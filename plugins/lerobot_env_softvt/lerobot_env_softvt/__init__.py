@@ -34,7 +34,7 @@ from lerobot.utils.constants import ACTION
 from mani_skill_softvt.data.lerobot import FPS, frame_feature_shapes
 from mani_skill_softvt.data.seeds import ID_EPISODES_PER_TASK
 from mani_skill_softvt.evaluation.lerobot_env import LeRobotEnv, records_path, suite_of_env_id
-from mani_skill_softvt.evaluation.runner import read_records
+from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.observations import parse_image_size
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS
 

@@ -1,6 +1,6 @@
 """A scripted top-down grasp, lift, hold and place, in absolute end-effector pose actions.
 
-The calibration trial (grasp, lift, hold: :mod:`.sweep`), the grasp demo, the tactile gallery and
+The calibration trial (grasp, lift, hold: :func:`mani_skill_softvt.calibrate.run_trial`), the grasp demo, the tactile gallery and
 the physics tests use it: it drives any :class:`~mani_skill_softvt.tasks.SoftBodyEnv` whose
 control mode is ``pd_ee_pose`` and records, per control step, the evaluator-side quantities (D_t,
 jaw width, object height, pad force) that those consumers score.
@@ -12,7 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..physics.constants import MIN_TET_VOLUME_RATIO
+from ..physics.fem import SimulationInstabilityError
 from ..policy import Policy
+from ..rollout import EvaluatorTrace, Observer, rollout
 from ..tasks.robot import ee_action, mid_height_grasp
 
 @dataclass
@@ -96,8 +99,6 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
     :class:`~mani_skill_softvt.physics.fem.SimulationInstabilityError`: a grasp the calibration
     measures must keep the mesh valid throughout (its peak D would not be trustworthy).
     """
-    from ..rollout import EvaluatorTrace, Observer, rollout
-
     object_name = object_name or env.unwrapped.object_names[0]  # the scene's first object unless named
     script = GraspScriptPolicy(plan or GraspPlan(), object_name, xy_offset)
     trace = EvaluatorTrace(object_name)
@@ -113,9 +114,6 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
         raise episode.exception
     t = trace.arrays()
     if t["collapsed_tets"].any():
-        from ..physics.constants import MIN_TET_VOLUME_RATIO
-        from ..physics.fem import SimulationInstabilityError
-
         k = int(np.argmax(t["collapsed_tets"] > 0))
         raise SimulationInstabilityError(f"{int(t['collapsed_tets'][k])} tets collapsed (volume <= {MIN_TET_VOLUME_RATIO} x "
                                          f"rest) at state {k} of the grasp script on '{object_name}'")
