@@ -51,7 +51,8 @@ def migrate_record(record: dict) -> dict:
     out.setdefault("tactile_model", 1 if "tactile" in str(obs_mode) else None)
     out.setdefault("collapsed_steps", 0)
     if "dsr_success" not in out:
-        out["dsr_success"] = bool(out["success"]) and out["r_max"] is not None and float(out["r_max"]) <= 1.0
+        r_max = out.get("r_max")
+        out["dsr_success"] = bool(out.get("success")) and r_max is not None and float(r_max) <= 1.0
     return out
 
 
