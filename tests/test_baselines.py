@@ -340,6 +340,7 @@ def test_training_resumes_bit_for_bit(tmp_path):
         T.train(cfg, tmp_path / "demos2", tmp_path / "b", progress=False)
 
 
+@pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
     # One demo whose chunk at a step is set by the state (x ramps with the step; the other columns
     # are constant). Sampled from the same noise, the trained policy's chunk must be far closer to

@@ -41,6 +41,7 @@ def test_committed_card_is_sane(asset_id):
     assert card.at_percentile(80.0)["tau_o"] <= card.tau_o
 
 
+@pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_quick_mode_reproduces_the_committed_card_and_the_envelope_holds(tmp_path):
     from mani_skill_softvt.calibrate import QUICK_ASSET, main
 

@@ -52,6 +52,7 @@ def test_resuming_demos_recorded_under_other_physics_is_refused(dataset, tmp_pat
     assert json.loads((tmp_path / "object_soft" / "manifest.json").read_text()) == manifest  # left as it was
 
 
+@pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lists(tmp_path):
     """The QC logs are committed and the episode files are not: generate records an accepted
     episode again where its file is missing, appends the new verdict and merges the task."""
@@ -80,6 +81,7 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
     assert (summary["generated"], summary["accepted"]) == (1, 1)
 
 
+@pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_path, capsys):
     """A task whose expert fails on a seed still ends with the demos asked for: the rejected seed
     (logged) is skipped, the next seed is drawn, and drawing stops at the count asked."""
