@@ -8,5 +8,6 @@ these read its policies, records and demos and write the campaign's reports:
 - :mod:`.closure`: a policy's commanded gripper closure over its episodes, beside the expert's draw;
 - :mod:`.touch_probes`: what the tactile and camera streams carry of force and deformation (linear probes);
 - :mod:`.recipe_search`: the training recipes ranked by open-loop error, then closed loop;
-- :mod:`.openloop`: a trained policy's held-out open-loop action error.
+- :mod:`.openloop`: a trained policy's held-out open-loop action error;
+- :mod:`.twin_pinch`: how rigid twins sit in the scripted pinch and what the tactile model shows of it.
 """
