@@ -151,8 +151,8 @@ def check_input(traj_path: str, target_control_mode: str | None) -> dict:
     try:
         meta = trajectory_json(Path(traj_path))
         parse_env_id(meta["env_info"]["env_id"])
-    except (FileNotFoundError, ValueError) as e:
-        _refuse(f"{traj_path}: {e}" if str(traj_path) not in str(e) else str(e))
+    except (FileNotFoundError, ValueError) as e:  # the json's errors name the json; the env id's, no file
+        _refuse(str(e) if str(Path(traj_path).with_suffix("")) in str(e) else f"{traj_path}: {e}")
     problem = gripper_action_problem(Path(traj_path), meta)
     if problem:
         _refuse(problem)
@@ -160,8 +160,11 @@ def check_input(traj_path: str, target_control_mode: str | None) -> dict:
     if target_control_mode is not None and target_control_mode != source:
         if target_control_mode not in CONTROL_MODES:
             _refuse(f"-c {target_control_mode}: not a SoftVT control mode; choose one of {CONTROL_MODES}")
-        if source != "pd_joint_pos" and not (source in ("pd_joint_delta_pos",) and normalized_gripper(target_control_mode)
-                                             and not target_control_mode.endswith("_binary")):
+        # ManiSkill converts from pd_joint_delta_pos too, carrying the gripper over: right only between
+        # its own continuous-gripper modes. Everything else goes through pd_joint_pos (_patch_conversion).
+        maniskill_only = (source == "pd_joint_delta_pos" and normalized_gripper(target_control_mode)
+                          and not target_control_mode.endswith("_binary"))
+        if source != "pd_joint_pos" and not maniskill_only:
             _refuse(f"{traj_path} holds {source} actions; -c converts from pd_joint_pos (what "
                     f"`python -m mani_skill_softvt.motionplanning` records by default): record in pd_joint_pos, then "
                     f"convert with -c {target_control_mode}")

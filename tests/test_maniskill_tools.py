@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.tasks.robot import GRIPPER_ACTION_VERSION, gripper_action
+from mani_skill_softvt.tasks.robot import GRIPPER_ACTION_VERSION
 from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES, list_tasks
 
 RIGID = "SoftVTObjectRigid-v1"
@@ -368,3 +368,26 @@ def test_motionplanning_refuses_bad_input_before_it_plans(tmp_path, capsys):
             main([*argv, "-n", "1"])
         assert e.value.code == 2
         assert why in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("obs_mode", ["rgb", "state"])
+def test_a_maniskill_checkpoint_sees_what_the_baselines_eval_env_shows_it(obs_mode):
+    # ManiSkillDiffusionPolicy flattens the evaluator's observation as the baseline's evaluation env
+    # does (FlattenRGBDObservationWrapper in rgb, the flat state in state).
+    from mani_skill.utils.wrappers.flatten import FlattenRGBDObservationWrapper
+
+    from mani_skill_softvt.evaluation.maniskill_dp import flatten_observation
+
+    raw = gym.make(RIGID_TASK, obs_mode=obs_mode, control_mode="pd_ee_delta_pose")
+    ours = flatten_observation(raw.reset(seed=0)[0])
+    theirs = gym.make(RIGID_TASK, obs_mode=obs_mode, control_mode="pd_ee_delta_pose")
+    if obs_mode == "rgb":
+        theirs = FlattenRGBDObservationWrapper(theirs)
+    expected = theirs.reset(seed=0)[0]
+    expected = {k: v[0].numpy() for k, v in expected.items()} if obs_mode == "rgb" else {"state": expected[0].numpy()}
+    assert ours.keys() == expected.keys()
+    for k in ours:
+        np.testing.assert_array_equal(ours[k], expected[k], err_msg=k)
+    assert obs_mode != "rgb" or ours["rgb"].shape == (224, 224, 6)  # both cameras, side by side in channels
+    raw.close()
+    theirs.close()

@@ -31,9 +31,13 @@ deformation, materials) is in any mode; the evaluator reads the env's evaluator-
 (:meth:`SoftBodyEnv.evaluator_state`).
 
 **Action** (``control_mode``): ``pd_ee_pose`` (the default; 7-D: absolute TCP position in the robot
-base frame, axis-angle orientation, gripper closure in [0, 1]), ``pd_ee_delta_pose`` (7-D),
-``pd_joint_pos`` and ``pd_joint_delta_pos`` (8-D), each also ``<mode>_binary`` (gripper < 0.5 open,
->= 0.5 close until the 10 N force limit); see :mod:`mani_skill_softvt.tasks.robot`.
+base frame, axis-angle orientation, gripper closure in [0, 1]), ManiSkill's ``pd_ee_delta_pose`` (7-D),
+``pd_joint_pos`` and ``pd_joint_delta_pos`` (8-D) with ManiSkill's gripper action (in [-1, 1], 1 open,
+-1 closed), each also ``<mode>_binary`` (open/close, close until the 10 N force limit); see
+:mod:`mani_skill_softvt.tasks.robot`.
+
+**Env ids:** the suite's (``SoftVTObjectSoft-v1``, ``task_id`` an env kwarg) and one per task
+(``SoftVTObjectSoft-Task3-v1``: ``task_id`` preset), for tools that pass an env id and no kwargs.
 
 **Reward** (``reward_mode``): ``sparse`` (the default, as the benchmark is scored by success): 1 on
 success. ``dense``: staged as in ManiSkill's tabletop tasks (:mod:`~mani_skill_softvt.tasks.rewards`),
