@@ -32,8 +32,9 @@ from .expert.solution import SOURCE_DESC
 from .observations import info_bool
 
 
-def parse_args(argv=None):
-    ap = parser()
+def parse_args(argv=None, ap: argparse.ArgumentParser | None = None):
+    """The checked arguments (:func:`check_args`); a bad value exits as an argparse error does."""
+    ap = ap or parser()
     args = ap.parse_args(argv)
     try:
         check_args(args)
@@ -166,11 +167,7 @@ def main(argv=None) -> dict:
     from .parallel import run_tasks
 
     ap = parser()
-    args = ap.parse_args(argv)
-    try:
-        check_args(args)
-    except ValueError as e:
-        ap.error(str(e))
+    args = parse_args(argv, ap)
     if args.num_traj < 1 or args.num_procs < 1 or (args.max_tries is not None and args.max_tries < 1):
         ap.error("-n, --num-procs and --max-tries must be >= 1")
     name = args.traj_name or f"task{args.task_id}"

@@ -330,10 +330,15 @@ def upgrade_gripper_actions(h5_path: Path) -> int:
     meta = trajectory_json(h5_path)
     mode = trajectory_control_mode(meta)
     kwargs = meta["env_info"]["env_kwargs"]
-    if gripper_action_problem(h5_path, meta) is None:
+    problem = gripper_action_problem(h5_path, meta)
+    if problem is None:
         return 0
-    if kwargs.get("gripper_action_version", 1) != 1 or not normalized_gripper(mode):
-        raise ValueError(gripper_action_problem(h5_path, meta))
+    try:
+        convertible = kwargs.get("gripper_action_version", 1) == 1 and normalized_gripper(mode)
+    except ValueError:  # not a SoftVT control mode
+        convertible = False
+    if not convertible:
+        raise ValueError(problem)
     suite, task_id = parse_env_id(meta["env_info"]["env_id"])
     task_id = kwargs.get("task_id", 0) if task_id is None else task_id
     binary_mode = f"{mode.removesuffix('_binary')}_binary"
