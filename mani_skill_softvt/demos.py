@@ -172,6 +172,13 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
             raise ValueError(f"{demo_set.manifest}: the demos there record {recorded.get('control_mode', 'pd_ee_pose')} "
                              f"actions, not {control_mode}; generate into another --out (or convert them with "
                              f"python -m mani_skill_softvt.replay -c {control_mode})")
+        from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
+
+        if normalized_gripper(control_mode) and recorded.get("gripper_action_version", 1) != GRIPPER_ACTION_VERSION:
+            raise ValueError(f"{demo_set.manifest}: the {control_mode} demos there command the gripper by its closure "
+                             f"in [0, 1], not by ManiSkill's normalised action; generate into another --out, or convert "
+                             f"each task<k>.h5 there with `{UPGRADE_COMMAND} FILE.h5` and set "
+                             f"\"gripper_action_version\": {GRIPPER_ACTION_VERSION} in the manifest")
         if stale:
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
@@ -201,8 +208,12 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
         logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
         return max(logged + [(num or 0) - 1, 0])
 
+    from .tasks.robot import GRIPPER_ACTION_VERSION, normalized_gripper
+
+    # Only ManiSkill's modes changed their gripper encoding: pd_ee_pose manifests stay as they were.
+    gripper = {"gripper_action_version": GRIPPER_ACTION_VERSION} if normalized_gripper(control_mode) else {}
     atomic_write_json(demo_set.manifest, {
-        "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, "physics": physics,
+        "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, **gripper, "physics": physics,
         "train_seeds": {t: [train_seed(t, 0), train_seed(t, last_index(t))] for t in tasks},
         "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
         "note": "training and evaluation seed ranges are disjoint by construction"})

@@ -54,8 +54,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--camera-size", default=None, metavar="HxW",
                     help="render the cameras at HxW (default: the size the policy asks for, a trained baseline's "
                          "own, else 224x224); a policy server trained on smaller images needs it")
-    ap.add_argument("--control-mode", default=None, choices=["pd_ee_pose", "pd_ee_pose_binary"],
-                    help="default: pd_ee_pose, or pd_ee_pose_binary for a binary-gripper baseline (vo-b, vt-b)")
+    ap.add_argument("--control-mode", default=None,
+                    help="pd_ee_pose (default), pd_ee_pose_binary (the binary-gripper baselines vo-b, vt-b; their "
+                         "default), or ManiSkill's pd_ee_delta_pose / pd_joint_delta_pos (a ManiSkill "
+                         "diffusion-policy checkpoint's default, evaluation/maniskill_dp.py)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--ray", metavar="ADDRESS", default=None,
                     help="run the episodes on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")

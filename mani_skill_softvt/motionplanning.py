@@ -4,13 +4,16 @@ A drop-in for ``python -m mani_skill.examples.motionplanning.panda.run`` (which 
 ManiSkill's own tasks): the same flags, the same output, the scripted expert as the solution
 (:func:`mani_skill_softvt.expert.solution.solve`)::
 
-    python -m mani_skill_softvt.motionplanning -e SoftVTObjectSoft-v1 --task-id 3 -n 10 --only-count-success
-    python -m mani_skill_softvt.motionplanning -e SoftVTObjectRigid-v1 -n 2 --save-video --record-dir demos
+    python -m mani_skill_softvt.motionplanning -e SoftVTObjectSoft-Task3-v1 -n 10 --only-count-success
+    python -m mani_skill_softvt.motionplanning -e SoftVTObjectRigid-v1 --task-id 3 -n 2 --save-video
 
-Writes ``<record-dir>/<env-id>/motionplanning/<traj-name>.h5`` + ``.json`` with ManiSkill's
-``RecordEpisode`` (``source_type="motionplanning"``, actions in ``pd_joint_pos`` unless
-``--control-mode`` says otherwise), plus the evaluator stream and episode metadata
-(:mod:`mani_skill_softvt.data.record`). Replay or convert it with ``python -m mani_skill_softvt.replay``.
+``-e`` takes a task's own env id (``SoftVTObjectSoft-Task3-v1``) or a suite's with ``--task-id``.
+Writes ``<record-dir>/<task env id>/motionplanning/<traj-name>.h5`` + ``.json`` (e.g.
+``demos/SoftVTObjectSoft-Task3-v1/motionplanning/task3.h5``) with ManiSkill's ``RecordEpisode``
+(``source_type="motionplanning"``, actions in ``pd_joint_pos`` unless ``--control-mode`` says
+otherwise, its gripper ManiSkill's normalised action), plus the evaluator stream and episode
+metadata (:mod:`mani_skill_softvt.data.record`); the json names the env
+``mani_skill_softvt:<task env id>``. Replay or convert it with ``python -m mani_skill_softvt.replay``.
 Seeds are the task's training seeds (:func:`mani_skill_softvt.data.seeds.train_seed`), disjoint
 from the evaluation seeds. The benchmark's own ``python -m mani_skill_softvt.demos generate`` runs
 the same solution with the same recorder, one resumable file per episode.
@@ -29,14 +32,24 @@ from .expert.solution import SOURCE_DESC
 from .observations import info_bool
 
 
-def parse_args(argv=None):
-    from .tasks.suites import SUITES
+def parse_args(argv=None, ap: argparse.ArgumentParser | None = None):
+    """The checked arguments (:func:`check_args`); a bad value exits as an argparse error does."""
+    ap = ap or parser()
+    args = ap.parse_args(argv)
+    try:
+        check_args(args)
+    except ValueError as e:
+        ap.error(str(e))
+    return args
 
-    env_ids = sorted(s.env_id for s in SUITES.values())
+
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.motionplanning", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-e", "--env-id", default="SoftVTObjectSoft-v1", choices=env_ids)
-    ap.add_argument("--task-id", type=int, default=0, help="task of the suite (0-9)")
+    ap.add_argument("-e", "--env-id", default="SoftVTObjectSoft-v1",
+                    help="a task's env id (SoftVTObjectSoft-Task3-v1), or a suite's (SoftVTObjectSoft-v1) with "
+                         "--task-id; either may be prefixed mani_skill_softvt:")
+    ap.add_argument("--task-id", type=int, default=None, help="task of the suite (0-9; default: the env id's, else 0)")
     ap.add_argument("-o", "--obs-mode", default="none",
                     help="observations to record (default none: replay into any obs mode later)")
     ap.add_argument("-n", "--num-traj", type=int, default=10, help="number of trajectories to generate")
@@ -58,7 +71,30 @@ def parse_args(argv=None):
     ap.add_argument("--max-tries", type=int, default=None, metavar="N",
                     help="with --only-count-success, stop after N seeds per process (default 20 per trajectory): "
                          "an expert that keeps failing ends the run with what it saved instead of looping")
-    return ap.parse_args(argv)
+    return ap
+
+
+def check_args(args) -> None:
+    """Resolve ``-e``/``--task-id`` into the task's own env id (``args.env_id``, bare) and check the
+    modes, before any process starts; a ValueError names the bad value and what to pass."""
+    from .tasks.softvt_task import OBS_MODES
+    from .tasks.robot import CONTROL_MODES
+    from .tasks.suites import SUITES, parse_env_id, task_spec
+
+    suite, task_id = parse_env_id(args.env_id)
+    if task_id is not None and args.task_id not in (None, task_id):
+        raise ValueError(f"-e {args.env_id} is task {task_id}, but --task-id {args.task_id} was passed; "
+                         f"pass -e {SUITES[suite].env_id} --task-id {args.task_id}, or drop --task-id")
+    task_id = task_id if task_id is not None else (0 if args.task_id is None else args.task_id)
+    task_spec(suite, task_id)  # validates the task id
+    args.suite, args.task_id, args.env_id = suite, task_id, SUITES[suite].task_env_id(task_id)
+    modes = [m for m in CONTROL_MODES if m.removesuffix("_binary") in ("pd_joint_pos", "pd_ee_pose")]
+    if args.control_mode not in modes:
+        raise ValueError(f"--control-mode {args.control_mode}: the expert records one of {modes}; record in "
+                         f"pd_joint_pos and convert with `python -m mani_skill_softvt.replay --traj-path FILE.h5 -c "
+                         f"{args.control_mode}`")
+    if args.obs_mode not in OBS_MODES:
+        raise ValueError(f"-o {args.obs_mode}: choose one of {OBS_MODES}")
 
 
 def make_recorder(env_id: str, task_id: int, output_dir: Path, traj_name: str, *, obs_mode: str = "none",
@@ -130,13 +166,18 @@ def main(argv=None) -> dict:
     from .data.record import quiet_maniskill_logger
     from .parallel import run_tasks
 
-    args = parse_args(argv)
+    ap = parser()
+    args = parse_args(argv, ap)
     if args.num_traj < 1 or args.num_procs < 1 or (args.max_tries is not None and args.max_tries < 1):
-        raise SystemExit("-n, --num-procs and --max-tries must be >= 1")
+        ap.error("-n, --num-procs and --max-tries must be >= 1")
     name = args.traj_name or f"task{args.task_id}"
     out = Path(args.record_dir) / args.env_id / "motionplanning" / f"{name}.h5"
     if out.exists():
-        raise SystemExit(f"{out} exists; pass another --traj-name or move it away (nothing was overwritten)")
+        ap.error(f"{out} exists; pass another --traj-name or move it away (nothing was overwritten)")
+    try:  # an unwritable --record-dir fails here, named, not in a worker
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        ap.error(f"cannot create {out.parent} ({e.strerror}); pass a writable --record-dir")
     procs = min(args.num_procs, args.num_traj)
     counts = [len(c) for c in np.array_split(np.arange(args.num_traj), procs)]
     items = [(args, args.start_index + k, procs, n, name if procs == 1 else f"{name}.{k}")

@@ -24,7 +24,7 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
     out, report = dataset
     assert report["tasks"][0]["accepted"] == 1, report
     meta = json.loads((out / "object_soft" / "task3.json").read_text())
-    assert meta["source_type"] == "motionplanning" and meta["env_info"]["env_id"] == "mani_skill_softvt:SoftVTObjectSoft-v1"
+    assert meta["source_type"] == "motionplanning" and meta["env_info"]["env_id"] == "mani_skill_softvt:SoftVTObjectSoft-Task3-v1"
     ep_meta = meta["episodes"][0]
     assert ep_meta["instruction"].startswith("Pick up the soft cream-colored cube")
     with h5py.File(out / "object_soft" / "task3.h5", "r") as f:

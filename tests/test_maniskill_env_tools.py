@@ -13,7 +13,7 @@ from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.physics.transforms import down_quat, down_rotvec, quat_angle
 from mani_skill_softvt.tasks import constants as C
-from mani_skill_softvt.tasks.robot import CONTROL_MODES, base_frame_pose, closure_to_q
+from mani_skill_softvt.tasks.robot import CONTROL_MODES, base_frame_pose, closure_to_q, gripper_action, normalized_gripper
 
 ENV_ID, TASK = "SoftVTObjectRigid-v1", 3
 OPEN_WIDTH, CLOSED_WIDTH = 2 * C.GRIPPER_Q_OPEN, 0.0  # jaw gap (m): 80 mm open; closed on nothing, the pads meet
@@ -22,7 +22,7 @@ TACTILE_H, TACTILE_W = 240, 320
 
 def make_cpu_env(env_id: str, obs_mode: str, control_mode: str = "pd_joint_delta_pos") -> gym.Env:
     """Factory of a single gymnasium-conforming env (numpy, unbatched), importable by a spawned
-    worker: it registers the SoftVT envs in that process too. Zeros hold a delta mode still."""
+    worker: it registers the SoftVT envs in that process too. Zero arm deltas hold a delta mode still."""
     import mani_skill_softvt  # noqa: F401
 
     return CPUGymWrapper(gym.make(env_id, task_id=TASK, obs_mode=obs_mode, control_mode=control_mode))
@@ -40,8 +40,9 @@ def _tcp_pose(u) -> np.ndarray:
     return u.agent.tcp.pose.raw_pose[0].cpu().numpy().astype(np.float64)  # world xyz, wxyz
 
 
-def _hold_still(u, mode: str, gripper: float = 0.0) -> np.ndarray:
-    """The action that keeps the arm where it is in ``mode``, with ``gripper`` as its gripper value."""
+def _hold_still(u, mode: str, closure: float = 0.0) -> np.ndarray:
+    """The action that keeps the arm where it is in ``mode``, commanding the gripper ``closure``
+    (0: open) in the mode's encoding."""
     arm = mode.removesuffix("_binary")
     if arm == "pd_ee_pose":
         a = base_frame_pose(_tcp_pose(u))  # absolute: the current pose as base-frame xyz and axis-angle
@@ -49,7 +50,7 @@ def _hold_still(u, mode: str, gripper: float = 0.0) -> np.ndarray:
         a = u.agent.robot.get_qpos()[0, :7].cpu().numpy()  # absolute: the current arm joints
     else:
         a = np.zeros(u.single_action_space.shape[0] - 1)  # deltas: no change
-    return np.concatenate([a, [gripper]]).astype(np.float32)
+    return np.concatenate([a, [gripper_action(closure, mode)]]).astype(np.float32)
 
 
 def _move(u, mode: str) -> np.ndarray:
@@ -97,7 +98,9 @@ def test_async_vector_env_with_shared_memory_in_spawned_workers(obs_mode):
                 assert np.array_equal(t["rgb"][0], t["rgb"][1]) and not t["depth"].any()
                 np.testing.assert_array_equal(t["marker_current"], t["marker_initial"])
         before = obs if obs_mode == "state" else obs["agent"]["qpos"]
-        obs, reward, terminated, truncated, info = venv.step(np.zeros((2, 8), np.float32))  # hold still
+        hold = np.zeros((2, 8), np.float32)
+        hold[:, -1] = 1.0  # ManiSkill's "open": zero joint deltas, the gripper as it is
+        obs, reward, terminated, truncated, info = venv.step(hold)
         assert reward.shape == terminated.shape == truncated.shape == (2,)
         assert not terminated.any() and not truncated.any() and not info["success"].any()
         for path, x in _leaves(obs):
@@ -172,7 +175,11 @@ def test_every_control_mode_holds_still_and_moves(mode):
     assert u.control_mode == mode
     space = env.action_space
     assert space.shape == ((8,) if "joint" in mode else (7,))
-    assert (space.low[-1], space.high[-1]) == (0.0, 1.0)  # the gripper value, the same in every mode
+    # The gripper: the paper's closure in pd_ee_pose, ManiSkill's normalised action in its own modes, where
+    # the whole action is in [-1, 1] in the delta modes (what ManiSkill's diffusion-policy baseline asserts).
+    assert (space.low[-1], space.high[-1]) == ((-1.0, 1.0) if normalized_gripper(mode) else (0.0, 1.0))
+    if "delta" in mode:
+        assert (space.low == -1).all() and (space.high == 1).all()
     env.reset(seed=0)
     start = _tcp_pose(u)[:3]
     for _ in range(5):
@@ -221,19 +228,45 @@ def test_gripper_value_in_binary_and_continuous_modes(mode):
     env = gym.make(ENV_ID, task_id=TASK, obs_mode="none", control_mode=mode)
     u = env.unwrapped
 
-    def width_after(g, steps=30):
+    def width_after(value, steps=30):
         env.reset(seed=0)
         assert u.gripper_width == pytest.approx(OPEN_WIDTH, abs=1e-4)
+        action = _hold_still(u, mode)
+        action[-1] = value  # the raw gripper action of the mode
         for _ in range(steps):
-            env.step(_hold_still(u, mode, g))  # in the air: nothing between the pads
+            env.step(action)  # in the air: nothing between the pads
         return u.gripper_width
 
     if mode.endswith("_binary"):
-        assert width_after(0.3) == pytest.approx(OPEN_WIDTH, abs=1e-3)  # < 0.5: open
-        assert width_after(0.7) == pytest.approx(CLOSED_WIDTH, abs=1e-3)  # >= 0.5: closed
+        # pd_ee_pose: < 0.5 open, >= 0.5 close; ManiSkill's modes: its +1 open, -1 close (sign).
+        opens, closes = (0.4, -0.4) if normalized_gripper(mode) else (0.3, 0.7)
+        assert width_after(opens) == pytest.approx(OPEN_WIDTH, abs=1e-3)
+        assert width_after(closes) == pytest.approx(CLOSED_WIDTH, abs=1e-3)
     else:
-        # A closure of 0.3 drives the jaw to its target 2 * q(0.3) = 50 mm: partway.
-        w = width_after(0.3)
+        # A closure of 0.3 (ManiSkill's modes: 1 - 2 * 0.3 = 0.4) drives the jaw to its target
+        # 2 * q(0.3) = 50 mm: partway.
+        w = width_after(gripper_action(0.3, mode))
         assert CLOSED_WIDTH + 0.01 < w < OPEN_WIDTH - 0.01
         assert w == pytest.approx(2 * closure_to_q(0.3), abs=1e-3)
+        if normalized_gripper(mode):
+            assert width_after(1.0) == pytest.approx(OPEN_WIDTH, abs=1e-3)  # ManiSkill's +1: open
+            assert width_after(-1.0) == pytest.approx(CLOSED_WIDTH, abs=1e-3)  # -1: closed
     env.close()
+
+
+@pytest.mark.parametrize("mode", ["pd_joint_delta_pos", "pd_ee_delta_pose"])
+def test_the_gripper_action_drives_the_fingers_as_maniskills_panda_does(mode):
+    # ManiSkill's own Panda (PickCube-v1) and SoftVT's, the same normalised gripper action: the same
+    # finger drive targets (SoftVT's Panda has ManiSkill's finger range; only its force limit differs).
+    targets = {}
+    for env_id, kwargs in (("PickCube-v1", {}), (ENV_ID, {"task_id": TASK})):
+        env = gym.make(env_id, obs_mode="none", control_mode=mode, **kwargs)
+        env.reset(seed=0)
+        assert (env.action_space.low[-1], env.action_space.high[-1]) == (-1.0, 1.0)
+        for a in (1.0, 0.4, -0.3, -1.0):
+            action = np.zeros(env.action_space.shape, np.float32)
+            action[-1] = a
+            env.step(action)
+            targets.setdefault(env_id, []).append(env.unwrapped.agent.robot.get_drive_targets()[0, -2:].numpy())
+        env.close()
+    np.testing.assert_allclose(targets[ENV_ID], targets["PickCube-v1"], atol=1e-7)

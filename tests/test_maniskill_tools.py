@@ -14,10 +14,12 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.tasks.suites import list_tasks
+from mani_skill_softvt.tasks.robot import GRIPPER_ACTION_VERSION
+from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES, list_tasks
 
 RIGID = "SoftVTObjectRigid-v1"
 TASK = 3
+RIGID_TASK = "SoftVTObjectRigid-Task3-v1"  # the task's own env id
 
 
 def _leaves(group, prefix=""):
@@ -28,9 +30,13 @@ def _leaves(group, prefix=""):
             yield f"{prefix}{k}", v
 
 
-def _run(module: str, *args: str) -> str:
-    """A command as a user types it (a fresh process: nothing imported beforehand)."""
+def _run(module: str, *args: str, ok: bool = True) -> subprocess.CompletedProcess | str:
+    """A command as a user types it (a fresh process: nothing imported beforehand); its stdout, or
+    with ``ok=False`` the finished process (a refusal: no traceback, the reason on stderr)."""
     proc = subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=600)
+    if not ok:
+        assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+        return proc
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc.stdout
 
@@ -61,7 +67,10 @@ def test_motionplanning_runner_records_maniskill_trajectories_with_the_evaluator
 
     meta = json.loads(mp_demo.with_suffix(".json").read_text())
     assert meta["source_type"] == "motionplanning"
-    assert meta["env_info"]["env_id"] == f"mani_skill_softvt:{RIGID}"  # gym.make imports the package by itself
+    # The task's own id, module-qualified: gym.make of the id alone imports the package and makes task 3.
+    assert meta["env_info"]["env_id"] == f"mani_skill_softvt:{RIGID_TASK}"
+    assert mp_demo.parent.parent.name == RIGID_TASK  # <record-dir>/<env id>/motionplanning/, as ManiSkill's runner
+    assert meta["env_info"]["env_kwargs"]["gripper_action_version"] == GRIPPER_ACTION_VERSION
     (ep,) = meta["episodes"]
     card = load_calibration_card(task_spec("object_rigid", TASK).soft_asset_id)
     assert ep["control_mode"] == "pd_joint_pos" and ep["success"]
@@ -70,7 +79,13 @@ def test_motionplanning_runner_records_maniskill_trajectories_with_the_evaluator
     with h5py.File(mp_demo, "r") as f:
         g = f["traj_0"]
         t = ep["elapsed_steps"]
-        assert g["actions"].shape == (t, 8)  # 7 arm joint targets and the gripper closure
+        assert g["actions"].shape == (t, 8)  # 7 arm joint targets and the gripper
+        # ManiSkill's normalised gripper: open (+1) at the start, the calibrated closure g as 1 - 2 g while
+        # held; the binary twin closes (-1) on it.
+        gripper = g["actions"][:, -1]
+        assert gripper[0] == 1.0 and gripper.min() == pytest.approx(1 - 2 * ep["closure"], abs=1e-6)
+        assert set(np.unique(g["actions_binary"][:, -1])) == {-1.0, 1.0}
+        assert ((g["actions_binary"][:, -1] == -1.0) == (gripper < 1.0)).all()
         assert g["env_states/actors/object"].shape[0] == t + 1 and g["evaluator/nodes"].shape[0] == t + 1
         assert g["evaluator/deformation_ratio"].shape == (t + 1,) and g["evaluator/is_grasped"].shape == (t,)
         # The evaluator stream is beside the observations, never inside them.
@@ -117,14 +132,22 @@ def test_delta_mode_replay_loads_like_maniskills_diffusion_policy_data(mp_demo, 
     src = _copy(mp_demo, tmp_path)
     _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", "pd_ee_delta_pose", "-o", "rgb", "--save-traj")
     dst = tmp_path / f"{src.stem}.rgb.pd_ee_delta_pose.physx_cpu.h5"
-    env = gym.make(RIGID, task_id=TASK, obs_mode="rgb", control_mode="pd_ee_delta_pose")
+    meta = json.loads(dst.with_suffix(".json").read_text())
+    # The baseline's --env-id is the json's: the task's own id (ManiSkill's RecordEpisode would record the bare one).
+    assert meta["env_info"]["env_id"] == f"mani_skill_softvt:{RIGID_TASK}"
+    env = gym.make(meta["env_info"]["env_id"], obs_mode="rgb", control_mode="pd_ee_delta_pose")
+    assert env.unwrapped.task.task_id == TASK
+    # The baseline's agent asserts its action space is [-1, 1] throughout.
+    assert (env.action_space.low == -1).all() and (env.action_space.high == 1).all()
     space = env.unwrapped.single_observation_space
     with h5py.File(dst, "r") as f:
         g = f["traj_0"]
         actions = g["actions"][()]
         t = len(actions)
         assert g["success"][-1]
-        assert actions.shape == (t, 7) and np.abs(actions[:, :6]).max() <= 1.0  # normalised deltas, the closure
+        assert actions.shape == (t, 7) and np.abs(actions).max() <= 1.0  # normalised deltas and gripper
+        with h5py.File(src, "r") as a:  # ManiSkill's converter carries the gripper over: the same encoding
+            np.testing.assert_array_equal(np.unique(actions[:, -1]), np.unique(a["traj_0/actions"][:, -1]))
 
         def check(node, sub):  # the baseline reorders the file's obs by the env's space: every key is there
             for k, s in sub.spaces.items():
@@ -144,8 +167,10 @@ def test_replay_converts_into_every_control_mode(mp_demo, tmp_path, mode):
     with h5py.File(tmp_path / f"{src.stem}.none.{mode}.physx_cpu.h5", "r") as f:
         assert f["traj_0/success"][-1]
         gripper = f["traj_0/actions"][:, -1]
-        if mode.endswith("_binary"):
-            assert set(np.unique(gripper)) == {0.0, 1.0}
+        if mode.endswith("_binary"):  # "close" is 1 in the paper's mode, ManiSkill's -1 in its own
+            assert set(np.unique(gripper)) == ({0.0, 1.0} if mode == "pd_ee_pose_binary" else {-1.0, 1.0})
+        elif mode == "pd_ee_pose":  # the closure again
+            assert gripper.min() == 0.0 and 0.0 < gripper.max() <= 1.0
 
 
 @pytest.mark.parametrize("env_id,obs_mode", [(RIGID, "state"), pytest.param(RIGID, "state_dict", marks=pytest.mark.slow),
@@ -235,3 +260,134 @@ def test_soft_joint_space_demo_converts_into_the_papers_action_space(tmp_path):
     dst = src.with_name(f"{src.stem}.none.pd_ee_pose.physx_cpu.h5")
     with h5py.File(dst, "r") as f:
         assert f["traj_0/success"][-1] and f["traj_0/actions"].shape[1] == 7
+
+
+# ---------------------------------------------------------------- env ids, bad input, old files
+def test_every_task_has_its_own_env_id_beside_the_suites():
+    from gymnasium.envs.registration import registry
+
+    for suite in SUITES.values():
+        assert registry[suite.env_id].kwargs["suite"] == suite.name  # the parametrised id, as before
+        for k in range(NUM_TASKS):
+            spec = registry[suite.task_env_id(k)]
+            assert spec.kwargs["suite"] == suite.name and spec.kwargs["task_id"] == k
+            assert spec.max_episode_steps == registry[suite.env_id].max_episode_steps
+    assert SUITES["object_soft"].task_env_id(3) == "SoftVTObjectSoft-Task3-v1"
+    # As ManiSkill's tools make it: the module-qualified id alone, no env kwargs.
+    env = gym.make(f"mani_skill_softvt:{RIGID_TASK}", obs_mode="none")
+    assert env.unwrapped.instruction == list_tasks("object_rigid")[TASK].instruction
+    env.close()
+    with pytest.raises(ValueError, match=r"SoftVTObjectRigid-Task3-v1 is task 3, but task_id=4.*SoftVTObjectRigid-Task4-v1"):
+        gym.make(RIGID_TASK, task_id=4)
+
+
+def _fake_trajectory(path: Path, env_id: str, control_mode: str = "pd_joint_pos", **kwargs) -> Path:
+    """A small ManiSkill trajectory file pair (no physics): enough for the checks before a replay."""
+    with h5py.File(path, "w") as f:
+        f["traj_0/actions"] = np.zeros((3, 8), np.float32)
+    meta = {"env_info": {"env_id": env_id, "env_kwargs": {"suite": "object_rigid", "task_id": TASK,
+                                                          "control_mode": control_mode, **kwargs}},
+            "episodes": [{"episode_id": 0, "control_mode": control_mode}]}
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    return path
+
+
+def test_replay_refuses_bad_input_naming_the_file_and_what_to_do(tmp_path):
+    from mani_skill_softvt.replay import main as replay_main
+
+    current = {"gripper_action_version": GRIPPER_ACTION_VERSION}
+    missing = tmp_path / "missing.h5"
+    good = _fake_trajectory(tmp_path / "good.h5", f"mani_skill_softvt:{RIGID_TASK}", **current)
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good.read_bytes()[:600])
+    shutil.copy(good.with_suffix(".json"), truncated.with_suffix(".json"))
+    no_json = tmp_path / "no_json.h5"
+    shutil.copy(good, no_json)
+    other = _fake_trajectory(tmp_path / "other.h5", "PickCube-v1", **current)
+    cases = {missing: "does not exist", truncated: "truncated or corrupt", no_json: "no_json.json does not exist",
+             other: "'PickCube-v1' is not a SoftVT env id"}
+    for path, why in cases.items():
+        with pytest.raises(SystemExit) as e:
+            replay_main(["--traj-path", str(path), "-o", "state"])
+        assert str(path.with_suffix(".json") if path is no_json else path) in e.value.code and why in e.value.code
+    with pytest.raises(SystemExit, match="pd_ee_pose_euler: not a SoftVT control mode; choose one of"):
+        replay_main(["--traj-path", str(good), "-c", "pd_ee_pose_euler"])
+    # As a user runs it, where h5py used to end in its own traceback: the file named, what to do, no traceback.
+    err = _run("mani_skill_softvt.replay", "--traj-path", str(truncated), "-o", "state", ok=False).stderr
+    assert err.startswith(f"python -m mani_skill_softvt.replay: error: {truncated} is not a readable HDF5 file")
+    assert "delete it and re-run the command that wrote it" in err
+
+
+def test_an_old_joint_mode_file_is_refused_then_upgraded_in_place(mp_demo, tmp_path, capsys):
+    from mani_skill_softvt.data.trajectory import gripper_action_problem, trajectory_json
+    from mani_skill_softvt.replay import check_input
+    from mani_skill_softvt.replay import main as replay_main
+
+    # The same demo as written before the gripper was ManiSkill's: closures in [0, 1], no version, the suite's id.
+    old = _copy(mp_demo, tmp_path)
+    with h5py.File(old, "r+") as f:
+        new_actions = f["traj_0/actions"][()]
+        for key in ("actions", "actions_binary"):
+            a = f[f"traj_0/{key}"][()]
+            a[:, -1] = (a[:, -1] < 1.0) if key == "actions_binary" else 0.5 * (1.0 - a[:, -1])
+            f[f"traj_0/{key}"][...] = a
+    meta = json.loads(old.with_suffix(".json").read_text())
+    meta["env_info"]["env_id"] = f"mani_skill_softvt:{RIGID}"
+    del meta["env_info"]["env_kwargs"]["gripper_action_version"]
+    old.with_suffix(".json").write_text(json.dumps(meta))
+
+    with pytest.raises(SystemExit) as e:
+        replay_main(["--traj-path", str(old), "-c", "pd_ee_delta_pose"])
+    assert str(old) in e.value.code and f"--upgrade-gripper {old}" in e.value.code and "closures in [0, 1]" in e.value.code
+    replay_main(["--upgrade-gripper", str(old)])
+    assert "1 episodes converted" in capsys.readouterr().out
+    with h5py.File(old, "r") as f, h5py.File(mp_demo, "r") as ref:
+        np.testing.assert_allclose(f["traj_0/actions"][()], new_actions, atol=1e-6)
+        np.testing.assert_array_equal(f["traj_0/actions_binary"][()], ref["traj_0/actions_binary"][()])
+    meta = trajectory_json(old)
+    assert meta["env_info"]["env_id"] == f"mani_skill_softvt:{RIGID_TASK}"
+    assert gripper_action_problem(old, meta) is None and check_input(str(old), "pd_ee_delta_pose")
+    replay_main(["--upgrade-gripper", str(old)])
+    assert "already current" in capsys.readouterr().out
+
+
+def test_motionplanning_refuses_bad_input_before_it_plans(tmp_path, capsys):
+    from mani_skill_softvt.motionplanning import main
+
+    (tmp_path / RIGID_TASK / "motionplanning").mkdir(parents=True)
+    (tmp_path / RIGID_TASK / "motionplanning" / "task3.h5").write_bytes(b"")
+    cases = [
+        (["-e", "SoftVTObjectSoftish-v1"], "'SoftVTObjectSoftish-v1' is not a SoftVT env id"),
+        (["-e", RIGID_TASK, "--task-id", "4"], f"-e {RIGID_TASK} is task 3, but --task-id 4"),
+        (["-e", RIGID, "--task-id", "12"], "task_id must be an integer in [0, 9]"),
+        (["-e", RIGID_TASK, "--control-mode", "pd_ee_delta_pose"], "convert with `python -m mani_skill_softvt.replay"),
+        (["-e", f"mani_skill_softvt:{RIGID_TASK}", "--record-dir", str(tmp_path)], "task3.h5 exists"),
+    ]
+    for argv, why in cases:
+        with pytest.raises(SystemExit) as e:
+            main([*argv, "-n", "1"])
+        assert e.value.code == 2
+        assert why in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("obs_mode", ["rgb", "state"])
+def test_a_maniskill_checkpoint_sees_what_the_baselines_eval_env_shows_it(obs_mode):
+    # ManiSkillDiffusionPolicy flattens the evaluator's observation as the baseline's evaluation env
+    # does (FlattenRGBDObservationWrapper in rgb, the flat state in state).
+    from mani_skill.utils.wrappers.flatten import FlattenRGBDObservationWrapper
+
+    from mani_skill_softvt.evaluation.maniskill_dp import flatten_observation
+
+    raw = gym.make(RIGID_TASK, obs_mode=obs_mode, control_mode="pd_ee_delta_pose")
+    ours = flatten_observation(raw.reset(seed=0)[0])
+    theirs = gym.make(RIGID_TASK, obs_mode=obs_mode, control_mode="pd_ee_delta_pose")
+    if obs_mode == "rgb":
+        theirs = FlattenRGBDObservationWrapper(theirs)
+    expected = theirs.reset(seed=0)[0]
+    expected = {k: v[0].numpy() for k, v in expected.items()} if obs_mode == "rgb" else {"state": expected[0].numpy()}
+    assert ours.keys() == expected.keys()
+    for k in ours:
+        np.testing.assert_array_equal(ours[k], expected[k], err_msg=k)
+    assert obs_mode != "rgb" or ours["rgb"].shape == (224, 224, 6)  # both cameras, side by side in channels
+    raw.close()
+    theirs.close()

@@ -8,14 +8,17 @@
   instructed object's FEM nodes (T+1, N, 3), every object's centroid (T+1, K, 3), D_t, R_t and
   the scene's collapsed tets (T+1), grasp, drop and pad-force events (T), and tau_o (all float32/float64/bool arrays);
 - ``traj_<i>/actions_binary`` (continuous-gripper modes): the actions with the gripper as the
-  binary command (closure > 0 is "close");
+  ``<mode>_binary`` command (closure > 0 is "close": 1 in ``pd_ee_pose``, -1 in ManiSkill's modes);
 - in the episode's json entry and as the group's attributes: ``instruction``, ``target_instance``
   and whatever the episode's producer put in :attr:`SoftVTRecordEpisode.episode_metadata` (the
   expert: ``closure``, ``planner``); the json also gets ``r_max``, the group ``seed``.
 
-``env_info.env_id`` is written as ``mani_skill_softvt:<env id>``: gymnasium imports the module
-named before the colon, so ManiSkill's own tools (``python -m mani_skill.trajectory.replay_trajectory``,
-its worker processes included) make the env from the json without importing this package first.
+``env_info.env_id`` is written as the task's own id, module-qualified
+(``mani_skill_softvt:SoftVTObjectSoft-Task3-v1``, :func:`~mani_skill_softvt.tasks.suites.recorded_env_id`):
+gymnasium imports the module named before the colon, so ManiSkill's own tools (``python -m
+mani_skill.trajectory.replay_trajectory``, its worker processes, its baselines' ``--env-id``) make
+the same task from the id alone, without importing this package first. ``env_kwargs`` keeps
+``task_id`` and records ``gripper_action_version`` (:mod:`mani_skill_softvt.tasks.robot`).
 
 Wrap a DSR-wrapped env (:func:`mani_skill_softvt.evaluation.wrapper.make_env`) to get R_t; a bare
 env records D_t only.
@@ -34,12 +37,12 @@ from mani_skill.utils.logging_utils import logger
 from mani_skill.utils.wrappers.record import RecordEpisode
 
 from ..rollout import EvaluatorTrace
+from ..tasks.robot import action_closure, gripper_action, normalized_gripper
+from ..tasks.suites import recorded_env_id
 
 # The evaluator trace's fields a recorded episode keeps beside "nodes" (float32), in this order.
 RECORDED = ("object_centroids", "deformation", "deformation_ratio", "collapsed_tets", "is_grasped", "dropped",
             "pad_force")
-
-ENV_ID_MODULE = "mani_skill_softvt"
 
 
 class SoftVTRecordEpisode(RecordEpisode):
@@ -50,8 +53,9 @@ class SoftVTRecordEpisode(RecordEpisode):
         self.episode_metadata: dict = {}
         self._trace: EvaluatorTrace | None = None
         info = getattr(self, "_json_data", {}).get("env_info")
-        if info is not None and ":" not in info["env_id"]:
-            info["env_id"] = f"{ENV_ID_MODULE}:{info['env_id']}"
+        if info is not None:
+            task = self.env.unwrapped.task
+            info["env_id"] = recorded_env_id(task.suite, task.task_id)
 
     # ------------------------------------------------------------------ stream
     def reset(self, *args, **kwargs):
@@ -92,7 +96,7 @@ class SoftVTRecordEpisode(RecordEpisode):
             # what the paper's binary-gripper variants train on.
             actions = group["actions"][()]
             binary = actions.copy()
-            binary[:, -1] = (actions[:, -1] > 0.0).astype(actions.dtype)
+            binary[:, -1] = binary_gripper_column(actions[:, -1], u.control_mode)
             group.create_dataset("actions_binary", data=binary)
         meta = dict(seed=int(episode["episode_seed"]), instruction=u.instruction, target_instance=u.target_instance,
                     **self.episode_metadata)
@@ -116,6 +120,15 @@ class SoftVTRecordEpisode(RecordEpisode):
 
 
 GZIP = {"compression": "gzip", "compression_opts": 4}  # lossless and deterministic
+
+
+def binary_gripper_column(values: np.ndarray, control_mode: str) -> np.ndarray:
+    """Gripper actions of ``control_mode`` as its ``_binary`` twin's commands: "close" for any
+    commanded closure > 0 (``pd_ee_pose``: 1 / 0; ManiSkill's modes: -1 / 1)."""
+    if not normalized_gripper(control_mode):
+        return (values > 0.0).astype(values.dtype)  # the paper's closure, as it always was recorded
+    binary_mode = f"{control_mode.removesuffix('_binary')}_binary"
+    return gripper_action(action_closure(values, control_mode), binary_mode).astype(values.dtype)
 
 
 def _gzip_large_datasets(group) -> None:

@@ -263,3 +263,103 @@ def _render_episode(trajectory_h5: Path, name: str, g, dst, obs_mode: str, obser
         out.attrs["tactile_model"] = tactile_model
     for k in frames[0]:
         _dataset(out, f"obs/{k}", np.stack([f[k] for f in frames]))
+
+
+# ---------------------------------------------------------------------- ManiSkill trajectory files
+def trajectory_json(h5_path: Path) -> dict:
+    """The json of a ManiSkill trajectory file (``<name>.json`` beside ``<name>.h5``), checked for
+    what replaying it needs (``env_info`` with ``env_id`` and ``env_kwargs``, ``episodes``); errors
+    name the file and what to do."""
+    json_path = Path(h5_path).with_suffix(".json")
+    if not json_path.exists():
+        raise FileNotFoundError(f"{json_path} does not exist: a ManiSkill trajectory is a pair, {Path(h5_path).name} "
+                                f"and {json_path.name} (env id, env kwargs, episode seeds); copy the json beside the "
+                                f"h5, or record the trajectory again")
+    meta = read_json(json_path)
+    info = meta.get("env_info")
+    if not isinstance(info, dict) or "env_id" not in info or not isinstance(info.get("env_kwargs"), dict) \
+            or not isinstance(meta.get("episodes"), list):
+        raise ValueError(f"{json_path} is not a ManiSkill trajectory's json (it needs env_info.env_id, "
+                         f"env_info.env_kwargs and episodes); record the trajectory again")
+    return meta
+
+
+def trajectory_control_mode(meta: dict) -> str | None:
+    """The control mode a trajectory's actions are in (its env kwargs', else its episodes')."""
+    mode = meta["env_info"]["env_kwargs"].get("control_mode")
+    if mode is None and meta["episodes"]:
+        mode = meta["episodes"][0].get("control_mode")
+    return mode
+
+
+def gripper_action_problem(h5_path: Path, meta: dict) -> str | None:
+    """Why the gripper actions of a SoftVT trajectory file are not in this version's encoding
+    (:data:`~mani_skill_softvt.tasks.robot.GRIPPER_ACTION_VERSION`), naming the command that
+    converts it; None if they are. Only the joint and delta modes changed: a ``pd_ee_pose`` file
+    is current whatever its version."""
+    from ..tasks.robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND, normalized_gripper
+
+    mode = trajectory_control_mode(meta)
+    version = meta["env_info"]["env_kwargs"].get("gripper_action_version", 1)  # unrecorded: written before it was
+    try:
+        changed = normalized_gripper(mode)
+    except ValueError:
+        return f"{h5_path}: control mode {mode!r} is not one of SoftVT's; record the trajectory again"
+    if not changed or version == GRIPPER_ACTION_VERSION:
+        return None
+    if version in GRIPPER_ACTION_VERSIONS:
+        return f"{h5_path} ({mode}): {GRIPPER_ACTION_VERSIONS[version].format(path=h5_path)}"
+    return (f"{h5_path}: gripper_action_version {version!r} is unknown to this version of mani_skill_softvt; "
+            f"upgrade the package, or record the trajectory again (`{UPGRADE_COMMAND}` converts version 1 only)")
+
+
+def upgrade_gripper_actions(h5_path: Path) -> int:
+    """Convert a version-1 SoftVT trajectory in a joint or delta mode (gripper closures g in [0, 1])
+    to the current encoding in place: its ``actions`` (and ``actions_binary``) gripper column becomes
+    ManiSkill's normalised action (1 - 2 g; binary: -1 close, 1 open), its json records
+    ``gripper_action_version`` and the task's own env id. Returns how many episodes it converted
+    (0: the file was current). The h5 is rewritten atomically; nothing else in it changes."""
+    from ..tasks.robot import GRIPPER_ACTION_VERSION, gripper_action, normalized_gripper
+    from ..tasks.suites import parse_env_id, recorded_env_id
+
+    h5_path = Path(h5_path)
+    problem = check_h5(h5_path, read=False)
+    if problem:
+        raise CorruptDataError(problem)
+    meta = trajectory_json(h5_path)
+    mode = trajectory_control_mode(meta)
+    kwargs = meta["env_info"]["env_kwargs"]
+    problem = gripper_action_problem(h5_path, meta)
+    if problem is None:
+        return 0
+    try:
+        convertible = kwargs.get("gripper_action_version", 1) == 1 and normalized_gripper(mode)
+    except ValueError:  # not a SoftVT control mode
+        convertible = False
+    if not convertible:
+        raise ValueError(problem)
+    suite, task_id = parse_env_id(meta["env_info"]["env_id"])
+    task_id = kwargs.get("task_id", 0) if task_id is None else task_id
+    binary_mode = f"{mode.removesuffix('_binary')}_binary"
+    episodes = 0
+
+    def write(tmp: Path):
+        nonlocal episodes
+        import shutil
+
+        shutil.copyfile(h5_path, tmp)
+        with h5py.File(tmp, "r+") as f:
+            for name in f.keys():
+                g = f[name]
+                for key, m in (("actions", mode), ("actions_binary", binary_mode)):
+                    if key in g:
+                        a = g[key][()]
+                        a[:, -1] = gripper_action(a[:, -1], m).astype(a.dtype)  # the old values are closures
+                        g[key][...] = a
+                episodes += 1
+
+    atomic_write(h5_path, write)
+    kwargs["gripper_action_version"] = GRIPPER_ACTION_VERSION
+    meta["env_info"]["env_id"] = recorded_env_id(suite, int(task_id))
+    atomic_write_json(h5_path.with_suffix(".json"), meta)
+    return episodes

@@ -101,7 +101,9 @@ class _BuiltinKind(PolicyKind):
 
 
 class _ClassKind(PolicyKind):
-    """``module:Class``: user code, imported and constructed without arguments in each process."""
+    """``module:Class``: user code, imported and constructed without arguments in each process. The
+    class may say what it runs in: ``camera_size``, ``obs_modes`` and ``control_modes`` (the first of
+    each its default), as a resolved source does."""
 
     name = "class"
 
@@ -116,8 +118,10 @@ class _ClassKind(PolicyKind):
             raise ValueError(f"cannot load policy '{spec}': {e}") from e
 
     def resolve(self, spec):
-        size = getattr(self._class(spec), "camera_size", None)
-        return PolicySource(spec, self.name, camera_size=None if size is None else tuple(int(v) for v in size))
+        cls = self._class(spec)
+        size = getattr(cls, "camera_size", None)
+        modes = {k: tuple(getattr(cls, k)) if getattr(cls, k, None) else None for k in ("obs_modes", "control_modes")}
+        return PolicySource(spec, self.name, camera_size=None if size is None else tuple(int(v) for v in size), **modes)
 
     def load(self, source):
         policy = self._class(source.spec)()

@@ -23,7 +23,9 @@ from .policies import PolicySource, resolve_policy
 from .protocols import episodes
 
 OBS_MODES = ("state_dict", "state", "rgb", "rgb+tactile", "none")
-CONTROL_MODES = ("pd_ee_pose", "pd_ee_pose_binary")
+# The paper's action space, and ManiSkill's delta modes, which its own baselines' checkpoints act in
+# (evaluation/maniskill_dp.py); the gripper in each mode's encoding (tasks/robot.py).
+CONTROL_MODES = ("pd_ee_pose", "pd_ee_pose_binary", "pd_ee_delta_pose", "pd_joint_delta_pos")
 DEFAULT_TASKS = (0, 3, 8)
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, rotvec_to_quat, yaw_between
 from ..tasks import constants as C
-from ..tasks.robot import ee_action, mid_height_grasp
+from ..tasks.robot import ee_action, gripper_action, mid_height_grasp, normalized_gripper
 from .planner import MotionPlanner, PlanningError, held_object, plan_expert_path
 
 PHASE_STEPS = {"approach": 15, "descend": 15, "close": 12, "lift": 15, "transport": 25, "lower": 15,
@@ -156,7 +156,9 @@ def joint_actions(env, plan: ExpertPlan):
 
 def mode_actions(env, plan: ExpertPlan):
     """Yield ``(phase, action)`` in the env's control mode: ``pd_ee_pose`` or ``pd_joint_pos``, or
-    either's ``_binary`` twin (any commanded closure is "close": 1, else 0)."""
+    either's ``_binary`` twin (any commanded closure is "close"), the gripper in the mode's encoding
+    (:func:`~mani_skill_softvt.tasks.robot.gripper_action`: the closure in ``pd_ee_pose``, ManiSkill's
+    normalised action in ``pd_joint_pos``)."""
     mode = env.unwrapped.control_mode
     arm = mode.removesuffix("_binary")
     if arm not in ("pd_ee_pose", "pd_joint_pos"):
@@ -164,8 +166,12 @@ def mode_actions(env, plan: ExpertPlan):
                          f"'{mode}': record in pd_joint_pos and convert with `python -m mani_skill_softvt.replay "
                          f"--traj-path FILE -c {mode}`")
     actions = expert_actions(env, plan) if arm == "pd_ee_pose" else joint_actions(env, plan)
+    normalized = normalized_gripper(mode)
     for phase, action in actions:
-        if mode.endswith("_binary"):
+        if normalized:
+            action = action.copy()
+            action[-1] = gripper_action(action[-1], mode)
+        elif mode.endswith("_binary"):
             action = action.copy()
             action[-1] = np.float32(action[-1] > 0.0)
         yield phase, action

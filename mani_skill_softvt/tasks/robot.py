@@ -12,16 +12,24 @@ Differences from ManiSkill's ``panda`` (same URDF and arm gains):
   motion planners drive; arm joint targets), ``pd_joint_delta_pos`` and ``pd_ee_delta_pose``
   (ManiSkill's normalised delta modes, what its learning baselines train on), all with ManiSkill
   Panda's arm gains and bounds;
-- every mode has the same gripper, in two encodings (``<mode>`` and ``<mode>_binary``):
+- the gripper, in two encodings per mode (``<mode>`` and ``<mode>_binary``) and two scales: the
+  paper's ``pd_ee_pose`` commands a closure, ManiSkill's modes (joint and delta) the normalised
+  action of ManiSkill's Panda, so its baselines, replay conversions and motion planners see what
+  they expect:
 
-  ===========================  =====================================================
-  ``<mode>``                    gripper closure target g in [0, 1] (0 open 80 mm, 1 fully closed)
-  ``<mode>_binary``             gripper command in {0, 1}: < 0.5 open, >= 0.5 close
-  ===========================  =====================================================
+  ===========================  ===============================================  ==========================
+  mode                          ``<mode>``                                       ``<mode>_binary``
+  ===========================  ===============================================  ==========================
+  ``pd_ee_pose``                closure g in [0, 1] (0 open 80 mm, 1 closed)     < 0.5 open, >= 0.5 close
+  ``pd_joint_pos``,             a in [-1, 1], ManiSkill's Panda's scale          > 0 open, <= 0 close
+  ``pd_joint_delta_pos``,       (1 open 80 mm, -1 closed): a = 1 - 2 g           (ManiSkill's +1 / -1)
+  ``pd_ee_delta_pose``
+  ===========================  ===============================================  ==========================
 
-  The closure maps linearly to the finger joint target q (half the jaw gap):
-  q = (1 - g) * GRIPPER_Q_OPEN + g * GRIPPER_Q_CLOSED. Because the gripper value means the same in
-  every mode, ``replay_trajectory -c`` carries it over unchanged.
+  Both scales map linearly onto the same finger joint target q (half the jaw gap):
+  q = (1 - g) * GRIPPER_Q_OPEN + g * GRIPPER_Q_CLOSED; ManiSkill's Panda has the same joint range.
+  "close" drives to the closed end until the force limit stops it. :func:`gripper_action` and
+  :func:`action_closure` convert between the two.
 """
 
 from __future__ import annotations
@@ -36,12 +44,17 @@ from mani_skill.agents.controllers import (PDEEPoseController, PDEEPoseControlle
                                            PDJointPosMimicControllerConfig)
 from mani_skill.agents.registration import register_agent
 from mani_skill.utils.common import to_numpy
+from mani_skill.utils.gym_utils import clip_and_scale_action
 from mani_skill.agents.robots.panda.panda import Panda
 from mani_skill.utils.geometry.rotation_conversions import axis_angle_to_quaternion
 from mani_skill.utils.structs.pose import Pose
 
 from ..physics.transforms import down_rotvec, quat_to_rotvec
 from . import constants as C
+
+
+ARM_MODES = ("pd_ee_pose", "pd_joint_pos", "pd_joint_delta_pos", "pd_ee_delta_pose")
+CONTROL_MODES = tuple(m for arm in ARM_MODES for m in (arm, f"{arm}_binary"))
 
 
 def closure_to_q(closure):
@@ -51,6 +64,51 @@ def closure_to_q(closure):
 
 def q_to_closure(q):
     return (q - C.GRIPPER_Q_OPEN) / (C.GRIPPER_Q_CLOSED - C.GRIPPER_Q_OPEN)
+
+
+# Version of the gripper actions' encoding, recorded in every trajectory file's env kwargs
+# (``gripper_action_version``). 1 (files without the kwarg): the closure in [0, 1] in every mode;
+# 2: ManiSkill's normalised action in the joint and delta modes, the closure in pd_ee_pose.
+GRIPPER_ACTION_VERSION = 2
+UPGRADE_COMMAND = "python -m mani_skill_softvt.replay --upgrade-gripper"
+GRIPPER_ACTION_VERSIONS = {  # why an older version is refused; {path}: the file
+    1: "its joint- or delta-mode gripper actions are closures in [0, 1] (written before mani_skill_softvt used "
+       "ManiSkill's normalised gripper action in [-1, 1] in those modes); convert the file in place with "
+       f"`{UPGRADE_COMMAND} {{path}}`, then run this again",
+}
+
+# The paper's mode: its gripper action is the closure itself. Every other arm mode is ManiSkill's and
+# takes ManiSkill's normalised gripper action.
+CLOSURE_ARM_MODES = ("pd_ee_pose",)
+
+
+def normalized_gripper(control_mode: str) -> bool:
+    """Whether ``control_mode``'s gripper action is ManiSkill's normalised one ([-1, 1], 1 open)
+    rather than the closure in [0, 1] (``pd_ee_pose`` and ``pd_ee_pose_binary``)."""
+    arm = control_mode.removesuffix("_binary")
+    if arm not in ARM_MODES:
+        raise ValueError(f"unknown control mode '{control_mode}'; choose one of {CONTROL_MODES}")
+    return arm not in CLOSURE_ARM_MODES
+
+
+def gripper_action(closure, control_mode: str):
+    """The gripper action of ``control_mode`` that commands ``closure`` (g in [0, 1]); a ``_binary``
+    mode's command is "close" for any g > 0 (what the expert's calibrated grasp means), else "open".
+    Works on floats and arrays."""
+    g = np.asarray(closure, np.float32)
+    if control_mode.endswith("_binary"):
+        g = (g > 0.0).astype(np.float32)
+    return (np.float32(1.0) - np.float32(2.0) * g) if normalized_gripper(control_mode) else g
+
+
+def action_closure(value, control_mode: str):
+    """The closure g in [0, 1] (a ``_binary`` mode's: 0 or 1) that ``control_mode``'s gripper action
+    ``value`` commands: the inverse of :func:`gripper_action`. Works on floats and arrays."""
+    v = np.asarray(value, np.float32)
+    if control_mode.endswith("_binary"):
+        closed = v <= 0.0 if normalized_gripper(control_mode) else v >= 0.5
+        return closed.astype(np.float32)
+    return np.float32(0.5) * (np.float32(1.0) - v) if normalized_gripper(control_mode) else v
 
 
 def ee_action(position_world: np.ndarray, closure: float, yaw: float = 0.0) -> np.ndarray:
@@ -108,29 +166,36 @@ class AxisAnglePoseControllerConfig(PDEEPoseControllerConfig):
     controller_cls = AxisAnglePoseController
 
 
-ARM_MODES = ("pd_ee_pose", "pd_joint_pos", "pd_joint_delta_pos", "pd_ee_delta_pose")
-CONTROL_MODES = tuple(m for arm in ARM_MODES for m in (arm, f"{arm}_binary"))
-
-
 class ClosureGripperController(PDJointPosMimicController):
-    """Mimic finger controller commanded by a closure g in [0, 1] (or a binary open/close)."""
+    """Mimic finger controller commanded by a closure g in [0, 1] (or a binary open/close), or, with
+    ``normalized``, by ManiSkill's Panda's normalised action in [-1, 1] (1 open, -1 closed)."""
 
     config: "ClosureGripperControllerConfig"
 
     def _initialize_action_space(self):
-        self.single_action_space = spaces.Box(np.zeros(1, np.float32), np.ones(1, np.float32), dtype=np.float32)
+        low = -1.0 if self.config.normalized else 0.0
+        self.single_action_space = spaces.Box(np.full(1, low, np.float32), np.ones(1, np.float32), dtype=np.float32)
 
     def set_action(self, action):
-        g = torch.as_tensor(action, dtype=torch.float32, device=self.device)
-        g = (g >= 0.5).float() if self.config.binary else g.clamp(0.0, 1.0)
+        a = torch.as_tensor(action, dtype=torch.float32, device=self.device)
+        if self.config.normalized:
+            if self.config.binary:
+                q = torch.where(a <= 0.0, C.GRIPPER_Q_CLOSED, C.GRIPPER_Q_OPEN)
+            else:
+                q = clip_and_scale_action(a, C.GRIPPER_Q_CLOSED, C.GRIPPER_Q_OPEN)  # as ManiSkill's Panda scales it
+        else:
+            # The paper's closure: unchanged arithmetic (pd_ee_pose records and policies depend on its bits).
+            g = (a >= 0.5).float() if self.config.binary else a.clamp(0.0, 1.0)
+            q = closure_to_q(g)
         # The parent's action is the finger target q itself (normalize_action=False).
-        super().set_action(closure_to_q(g))
+        super().set_action(q)
 
 
 @dataclass
 class ClosureGripperControllerConfig(PDJointPosMimicControllerConfig):
     controller_cls = ClosureGripperController
     binary: bool = False
+    normalized: bool = False  # ManiSkill's [-1, 1] action (joint and delta modes) instead of the closure
 
 
 @register_agent(override=True)
@@ -160,6 +225,7 @@ class PandaSoftVT(Panda):
                     normalize_action=False,
                     mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
                     binary=binary,
+                    normalized=normalized_gripper(mode),
                 )
                 configs[mode] = dict(arm=deepcopy(arm), gripper=gripper)
         return configs

@@ -31,9 +31,13 @@ deformation, materials) is in any mode; the evaluator reads the env's evaluator-
 (:meth:`SoftBodyEnv.evaluator_state`).
 
 **Action** (``control_mode``): ``pd_ee_pose`` (the default; 7-D: absolute TCP position in the robot
-base frame, axis-angle orientation, gripper closure in [0, 1]), ``pd_ee_delta_pose`` (7-D),
-``pd_joint_pos`` and ``pd_joint_delta_pos`` (8-D), each also ``<mode>_binary`` (gripper < 0.5 open,
->= 0.5 close until the 10 N force limit); see :mod:`mani_skill_softvt.tasks.robot`.
+base frame, axis-angle orientation, gripper closure in [0, 1]), ManiSkill's ``pd_ee_delta_pose`` (7-D),
+``pd_joint_pos`` and ``pd_joint_delta_pos`` (8-D) with ManiSkill's gripper action (in [-1, 1], 1 open,
+-1 closed), each also ``<mode>_binary`` (open/close, close until the 10 N force limit); see
+:mod:`mani_skill_softvt.tasks.robot`.
+
+**Env ids:** the suite's (``SoftVTObjectSoft-v1``, ``task_id`` an env kwarg) and one per task
+(``SoftVTObjectSoft-Task3-v1``: ``task_id`` preset), for tools that pass an env id and no kwargs.
 
 **Reward** (``reward_mode``): ``sparse`` (the default, as the benchmark is scored by success): 1 on
 success. ``dense``: staged as in ManiSkill's tabletop tasks (:mod:`~mani_skill_softvt.tasks.rewards`),
@@ -63,8 +67,9 @@ from ..calibration.cards import load_calibration_card
 from ..paths import CALIBRATION_DIR
 from . import constants as C
 from . import rewards
+from .robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
 from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
-from .suites import SUITES, TaskSpec, task_spec
+from .suites import NUM_TASKS, SUITES, TaskSpec, task_spec
 
 OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
 
@@ -78,7 +83,21 @@ class SoftVTTaskEnv(SoftBodyEnv):
 
     def __init__(self, *args, suite: str = "object_soft", task_id: int = 0, obs_mode: str | None = None,
                  robot_init_qpos_noise: float = C.ROBOT_INIT_QPOS_NOISE, calibration_dir: str | None = None,
-                 **kwargs):
+                 env_task_id: int | None = None, gripper_action_version: int = GRIPPER_ACTION_VERSION, **kwargs):
+        # env_task_id: the task a per-task env id names (registered with it); another task_id would make
+        # the env disagree with its own id, and with every file that records that id.
+        if env_task_id is not None and task_id != env_task_id:
+            s = SUITES[suite]
+            raise ValueError(f"{s.task_env_id(env_task_id)} is task {env_task_id}, but task_id={task_id!r} was "
+                             f"passed; make {s.task_env_id(task_id) if task_id in range(NUM_TASKS) else s.env_id} "
+                             f"instead, or {s.env_id} with task_id")
+        # gripper_action_version: the gripper encoding a recorded file's actions are in (its json's
+        # env kwargs); the env runs the current one only (mani_skill_softvt.tasks.robot).
+        if gripper_action_version != GRIPPER_ACTION_VERSION:
+            why = GRIPPER_ACTION_VERSIONS.get(gripper_action_version, "this version of mani_skill_softvt does not know "
+                                              "it; upgrade the package or record the file again")
+            raise ValueError(f"gripper_action_version={gripper_action_version!r} (a recorded file's env kwargs): "
+                             f"{why.format(path='FILE.h5')}")
         self.task: TaskSpec = task_spec(suite, task_id)
         self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
@@ -253,5 +272,12 @@ class SoftVTTaskEnv(SoftBodyEnv):
         return {"tcp_pose": self.agent.tcp.pose.raw_pose, "gripper_width": width}
 
 
+# Each suite's id takes task_id as an env kwarg; beside it one id per task (SoftVTObjectSoft-Task3-v1) for
+# tools that pass an env id and no kwargs. The gripper version is a registered kwarg so that every
+# file any RecordEpisode writes (ManiSkill's replay's too) records it in its env kwargs.
 for _suite in SUITES.values():
-    register_env(_suite.env_id, max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite.name)(SoftVTTaskEnv)
+    register_env(_suite.env_id, max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite.name,
+                 gripper_action_version=GRIPPER_ACTION_VERSION)(SoftVTTaskEnv)
+    for _k in range(NUM_TASKS):
+        register_env(_suite.task_env_id(_k), max_episode_steps=C.MAX_EPISODE_STEPS, suite=_suite.name, task_id=_k,
+                     env_task_id=_k, gripper_action_version=GRIPPER_ACTION_VERSION)(SoftVTTaskEnv)

@@ -42,6 +42,13 @@ class Suite:
         """The prop objects are placed in or on."""
         return "basket" if self.layout == "object" else "plate"
 
+    def task_env_id(self, task_id: int) -> str:
+        """The env id that names one task of the suite, e.g. ``SoftVTObjectSoft-Task3-v1``: for tools
+        that take an env id and no env kwargs (ManiSkill's baselines' ``--env-id``)."""
+        task_spec(self.name, task_id)  # validates task_id
+        stem, version = self.env_id.rsplit("-v", 1)
+        return f"{stem}-Task{task_id}-v{version}"
+
 
 SUITES = {s.name: s for s in (
     Suite("object_soft", "SoftVTObjectSoft-v1", "object", rigid=False),
@@ -50,6 +57,33 @@ SUITES = {s.name: s for s in (
     Suite("spatial_rigid", "SoftVTSpatialRigid-v1", "spatial", rigid=True),
 )}
 NUM_TASKS = len(_TASK_TABLE)
+
+
+# gymnasium imports the module named before the colon of an env id: ids recorded as
+# "mani_skill_softvt:<id>" make the env in a process that never imported the package.
+ENV_ID_MODULE = "mani_skill_softvt"
+
+
+def recorded_env_id(suite: str, task_id: int) -> str:
+    """The env id every file of the package records: the task's own id, module-qualified
+    (``mani_skill_softvt:SoftVTObjectSoft-Task3-v1``), so ``gym.make`` of it alone (as ManiSkill's
+    replay and baselines do) makes the same task."""
+    return f"{ENV_ID_MODULE}:{get_suite(suite).task_env_id(task_id)}"
+
+
+def parse_env_id(env_id: str) -> tuple[str, int | None]:
+    """(suite name, task id or None) of a SoftVT env id: a suite's (``SoftVTObjectSoft-v1``: no
+    task) or a task's (``SoftVTObjectSoft-Task3-v1``), either with the ``mani_skill_softvt:`` prefix."""
+    bare = env_id.split(":", 1)[1] if env_id.startswith(f"{ENV_ID_MODULE}:") else env_id
+    for s in SUITES.values():
+        if bare == s.env_id:
+            return s.name, None
+        for k in range(NUM_TASKS):
+            if bare == s.task_env_id(k):
+                return s.name, k
+    examples = ", ".join(sorted(s.env_id for s in SUITES.values()))
+    raise ValueError(f"'{env_id}' is not a SoftVT env id; use a suite's id ({examples}) or a task's, "
+                     f"e.g. {SUITES['object_soft'].task_env_id(3)} (optionally prefixed '{ENV_ID_MODULE}:')")
 
 
 def get_suite(name: str) -> Suite:
