@@ -57,6 +57,7 @@ from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .physics.constants import physics_signature, signature_mismatch
 from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
+from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
 from .tasks.suites import NUM_TASKS, SUITES
 
 
@@ -172,7 +173,6 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
             raise ValueError(f"{demo_set.manifest}: the demos there record {recorded.get('control_mode', 'pd_ee_pose')} "
                              f"actions, not {control_mode}; generate into another --out (or convert them with "
                              f"python -m mani_skill_softvt.replay -c {control_mode})")
-        from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
 
         if normalized_gripper(control_mode) and recorded.get("gripper_action_version", 1) != GRIPPER_ACTION_VERSION:
             raise ValueError(f"{demo_set.manifest}: the {control_mode} demos there command the gripper by its closure "
@@ -207,8 +207,6 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
     def last_index(t: int) -> int:
         logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
         return max(logged + [(num or 0) - 1, 0])
-
-    from .tasks.robot import GRIPPER_ACTION_VERSION, normalized_gripper
 
     # Only ManiSkill's modes changed their gripper encoding: pd_ee_pose manifests stay as they were.
     gripper = {"gripper_action_version": GRIPPER_ACTION_VERSION} if normalized_gripper(control_mode) else {}

@@ -26,10 +26,21 @@ import multiprocessing as mp
 import os
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
+from mani_skill.trajectory.merge_trajectory import merge_trajectories
+from tqdm import tqdm
 
-from .expert.solution import SOURCE_DESC
+from .data.record import SoftVTRecordEpisode, quiet_maniskill_logger
+from .data.seeds import train_seed
+from .evaluation.wrapper import DSRWrapper
+from .expert.solution import SOURCE_DESC, solve
 from .observations import info_bool
+from .parallel import run_tasks
+from .tasks import constants as C
+from .tasks.robot import CONTROL_MODES
+from .tasks.softvt_task import OBS_MODES
+from .tasks.suites import SUITES, parse_env_id, task_spec
 
 
 def parse_args(argv=None, ap: argparse.ArgumentParser | None = None):
@@ -77,10 +88,6 @@ def parser() -> argparse.ArgumentParser:
 def check_args(args) -> None:
     """Resolve ``-e``/``--task-id`` into the task's own env id (``args.env_id``, bare) and check the
     modes, before any process starts; a ValueError names the bad value and what to pass."""
-    from .tasks.softvt_task import OBS_MODES
-    from .tasks.robot import CONTROL_MODES
-    from .tasks.suites import SUITES, parse_env_id, task_spec
-
     suite, task_id = parse_env_id(args.env_id)
     if task_id is not None and args.task_id not in (None, task_id):
         raise ValueError(f"-e {args.env_id} is task {task_id}, but --task-id {args.task_id} was passed; "
@@ -102,12 +109,6 @@ def make_recorder(env_id: str, task_id: int, output_dir: Path, traj_name: str, *
                   reward_mode: str | None = None, shader: str = "default", sim_backend: str = "auto"):
     """A DSR-wrapped SoftVT env inside :class:`~mani_skill_softvt.data.record.SoftVTRecordEpisode`,
     recording ``<output_dir>/<traj_name>.h5`` as ManiSkill's runner does (no save on reset)."""
-    import gymnasium as gym
-
-    from .data.record import SoftVTRecordEpisode
-    from .evaluation.wrapper import DSRWrapper
-    from .tasks import constants as C
-
     kwargs = dict(task_id=task_id, obs_mode=obs_mode, control_mode=control_mode, render_mode=render_mode,
                   sim_backend=sim_backend, sensor_configs=dict(shader_pack=shader),
                   human_render_camera_configs=dict(shader_pack=shader))
@@ -123,9 +124,6 @@ def _run(args, first: int, stride: int, count: int, traj_name: str, queue) -> st
     """Record ``count`` trajectories into one file, from the training seeds with indices ``first``,
     ``first + stride``, ... (more of them on failures with --only-count-success; processes take
     interleaved indices, so they never share a seed); puts per-trajectory progress on ``queue``."""
-    from .data.seeds import train_seed
-    from .expert.solution import solve
-
     output_dir = Path(args.record_dir) / args.env_id / "motionplanning"
     env = make_recorder(args.env_id, args.task_id, output_dir, traj_name, obs_mode=args.obs_mode,
                         control_mode=args.control_mode, render_mode=args.render_mode, save_video=args.save_video,
@@ -159,13 +157,6 @@ def _run(args, first: int, stride: int, count: int, traj_name: str, queue) -> st
 
 
 def main(argv=None) -> dict:
-    from tqdm import tqdm
-
-    from mani_skill.trajectory.merge_trajectory import merge_trajectories
-
-    from .data.record import quiet_maniskill_logger
-    from .parallel import run_tasks
-
     ap = parser()
     args = parse_args(argv, ap)
     if args.num_traj < 1 or args.num_procs < 1 or (args.max_tries is not None and args.max_tries < 1):

@@ -41,8 +41,20 @@ import types
 from pathlib import Path
 
 import numpy as np
+from mani_skill.trajectory import replay_trajectory
 
-from .tasks.robot import UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
+from . import tasks  # noqa: F401  (registers the SoftVT envs before ManiSkill makes one)
+from .data.trajectory import (
+    check_h5,
+    gripper_action_problem,
+    trajectory_control_mode,
+    trajectory_json,
+    upgrade_gripper_actions,
+)
+from .fileio import atomic_write_json, read_json
+from .physics.transforms import quat_to_rotvec
+from .tasks.robot import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
+from .tasks.suites import parse_env_id, recorded_env_id
 
 PROG = "python -m mani_skill_softvt.replay"
 
@@ -70,8 +82,6 @@ def joint_pos_to_ee_pose(output_mode, ori_actions, ori_env, env, render=False, p
     """Replay ``pd_joint_pos`` actions in ``env`` (``pd_ee_pose``, axis-angle): per step the TCP
     pose (robot base frame) that the recorded arm joint target reaches, and the recorded gripper.
     The signature is ManiSkill's converters'; ``ori_env`` is not stepped (the target is the action)."""
-    from .physics.transforms import quat_to_rotvec
-
     u = env.unwrapped
     arm = u.agent.controller.controllers["arm"]
     pin = u.agent.robot.create_pinocchio_model()
@@ -141,10 +151,6 @@ def check_input(traj_path: str, target_control_mode: str | None) -> dict:
     """The trajectory's json, after checking what replaying ``traj_path`` needs: a readable h5 (the
     same check as ``demos``), its json, a SoftVT env id, gripper actions in this version's encoding,
     and a conversion this entry can make. Refuses (SystemExit) naming the file and what to do."""
-    from .data.trajectory import check_h5, gripper_action_problem, trajectory_control_mode, trajectory_json
-    from .tasks.robot import CONTROL_MODES
-    from .tasks.suites import parse_env_id
-
     problem = check_h5(Path(traj_path), read=False)
     if problem:
         _refuse(problem)
@@ -175,9 +181,6 @@ def record_task_env_id(traj_path: str, obs_mode: str, control_mode: str, meta: d
     """Name the task's own env id (module-qualified) in the json of the file ManiSkill's replay
     wrote from ``traj_path``: its RecordEpisode records the bare id gymnasium made (and, from a suite's
     id, no task). The path is ManiSkill's naming, ``<name>.<obs_mode>.<control_mode>.physx_cpu``."""
-    from .fileio import atomic_write_json, read_json
-    from .tasks.suites import parse_env_id, recorded_env_id
-
     src = Path(traj_path)
     out = src.parent / f"{src.stem.split('.')[0]}.{obs_mode}.{control_mode}.physx_cpu.json"
     if not out.exists():
@@ -193,8 +196,6 @@ def record_task_env_id(traj_path: str, obs_mode: str, control_mode: str, meta: d
 def upgrade(paths: list[str]) -> None:
     """``--upgrade-gripper FILE.h5 ...``: convert version-1 trajectories in place
     (:func:`mani_skill_softvt.data.trajectory.upgrade_gripper_actions`)."""
-    from .data.trajectory import upgrade_gripper_actions
-
     if not paths:
         _refuse(f"{UPGRADE_COMMAND} needs the trajectory files (.h5) to convert")
     for p in paths:
@@ -210,8 +211,6 @@ def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["--upgrade-gripper"]:
         return upgrade(argv[1:])
-    import mani_skill_softvt  # noqa: F401  (registers the SoftVT envs before ManiSkill makes one)
-    from mani_skill.trajectory import replay_trajectory
 
     args = replay_trajectory.parse_args(argv)
     meta = check_input(args.traj_path, args.target_control_mode)

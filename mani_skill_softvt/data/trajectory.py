@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -26,6 +27,14 @@ import torch
 from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import nest
 from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
+from ..tasks.robot import (
+    GRIPPER_ACTION_VERSION,
+    GRIPPER_ACTION_VERSIONS,
+    UPGRADE_COMMAND,
+    gripper_action,
+    normalized_gripper,
+)
+from ..tasks.suites import parse_env_id, recorded_env_id
 
 # Bump when what a rendering holds for the same states changes (cameras, shaders, observation
 # keys): renderings of an older version are then rendered again, not reused.
@@ -297,8 +306,6 @@ def gripper_action_problem(h5_path: Path, meta: dict) -> str | None:
     (:data:`~mani_skill_softvt.tasks.robot.GRIPPER_ACTION_VERSION`), naming the command that
     converts it; None if they are. Only the joint and delta modes changed: a ``pd_ee_pose`` file
     is current whatever its version."""
-    from ..tasks.robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND, normalized_gripper
-
     mode = trajectory_control_mode(meta)
     version = meta["env_info"]["env_kwargs"].get("gripper_action_version", 1)  # unrecorded: written before it was
     try:
@@ -319,9 +326,6 @@ def upgrade_gripper_actions(h5_path: Path) -> int:
     ManiSkill's normalised action (1 - 2 g; binary: -1 close, 1 open), its json records
     ``gripper_action_version`` and the task's own env id. Returns how many episodes it converted
     (0: the file was current). The h5 is rewritten atomically; nothing else in it changes."""
-    from ..tasks.robot import GRIPPER_ACTION_VERSION, gripper_action, normalized_gripper
-    from ..tasks.suites import parse_env_id, recorded_env_id
-
     h5_path = Path(h5_path)
     problem = check_h5(h5_path, read=False)
     if problem:
@@ -345,7 +349,6 @@ def upgrade_gripper_actions(h5_path: Path) -> int:
 
     def write(tmp: Path):
         nonlocal episodes
-        import shutil
 
         shutil.copyfile(h5_path, tmp)
         with h5py.File(tmp, "r+") as f:

@@ -34,6 +34,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import torch
+from gymnasium import spaces
+from mani_skill.utils.common import flatten_state_dict, to_numpy
 
 from ..policy import Policy
 
@@ -75,8 +78,6 @@ def flatten_observation(obs) -> dict[str, np.ndarray]:
     """One step's observation (the env's batch of one) as the script's evaluation env gives it to
     the agent, unstacked: ``{"state": (D,), "rgb": (H, W, 3 * cameras)}`` in ``rgb``, ``{"state": (D,)}``
     in ``state`` (ManiSkill's ``FlattenRGBDObservationWrapper`` / the flat state)."""
-    from mani_skill.utils.common import flatten_state_dict, to_numpy
-
     if not isinstance(obs, dict):
         return {"state": np.asarray(to_numpy(obs), np.float32).reshape(-1)}
     if "tactile" in obs:
@@ -108,9 +109,6 @@ class ManiSkillDiffusionPolicy(Policy):
         self.pending: list[np.ndarray] = []
 
     def _build(self, frame: dict[str, np.ndarray]) -> None:
-        import torch
-        from gymnasium import spaces
-
         mode = "rgb" if "rgb" in frame else "state"
         module = load_script(self.dp_dir_path, SCRIPTS[mode])
         args = module.tyro.cli(module.Args, args=shlex.split(os.environ.get("SOFTVT_MANISKILL_DP_ARGS", "")))
@@ -138,16 +136,12 @@ class ManiSkillDiffusionPolicy(Policy):
         self.frames = deque(maxlen=h)
 
     def reset(self, instruction: str, seed: int) -> None:
-        import torch
-
         torch.manual_seed(0 if seed is None else int(seed))
         self.pending = []
         if self.frames is not None:
             self.frames.clear()
 
     def act(self, obs) -> np.ndarray:
-        import torch
-
         frame = flatten_observation(obs)
         if self.agent is None:
             self._build(frame)
