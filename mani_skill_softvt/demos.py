@@ -56,9 +56,8 @@ from .observations import camera_sensor_configs, camera_size_name, flatten_batch
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .physics.constants import physics_signature, signature_mismatch
-from .tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
-from .tasks.suites import NUM_TASKS, SUITES
+from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
 
 def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], dict]:
@@ -322,7 +321,8 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
 
     try:
         return write_rendering(trajectory_h5, out_h5, obs_mode, observe, camera_sensor_configs(camera_size),
-                               CURRENT_RENDER_KEYS.get(obs_mode, ()), progress)
+                               CURRENT_RENDER_KEYS.get(obs_mode, ()), progress,
+                               tactile_model=get_suite(suite).frames_tactile_model(obs_mode))
     finally:
         if env is not None:
             env.close()
@@ -455,7 +455,7 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
         if not src.exists():
             print(f"task {t}: no demos at {src}; run generate first")
         elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
-                                  TACTILE_MODEL_VERSION if "tactile" in args.obs_mode else None):
+                                  get_suite(args.suite).frames_tactile_model(args.obs_mode)):
             print(f"task {t}: already rendered (delete {dst.name} to redo it)")
         else:
             todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Baselines campaign, step 1 (docs/baselines.md): Object-Soft expert demos, resumable across sessions.
-#   bash scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
+# Expert demos for the baselines (docs/baselines.md), resumable across sessions: Object-Soft's
+# (the first campaign, step 1), or another suite's with SUITE=object_rigid (findings campaign, step 2).
+#   [SUITE=object_soft] bash scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
 # Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
-# R_max histogram) are copied back into demos/object_soft/ for the commit. On a machine without
+# R_max histogram) are copied back into demos/$SUITE/ for the commit. On a machine without
 # the episodes, the committed QC logs are copied out first and `generate` records their accepted
 # episodes again. Rounds of ROUND more accepted demos per task keep the tasks level if a session
 # ends early. Each task draws training seeds in order until it has ACCEPTED demos (the expert fails
@@ -17,30 +18,31 @@ NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}; MAX_SEEDS=${4:-250}
   echo "usage: $0 [ACCEPTED>0] [WORKERS>0] [ROUND>0] [MAX_SEEDS>=ACCEPTED]" >&2; exit 2; }
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 PY=${PY:-.venv/bin/python}
-store=$SOFTVT_DEMOS_DIR/object_soft
+SUITE=${SUITE:-object_soft}
+store=$SOFTVT_DEMOS_DIR/$SUITE
 mkdir -p "$store"
 # The committed small products go to the store where it lacks them or holds shorter logs (a store
 # left by an older session); the store's own, longer logs are kept.
-if [ -d demos/object_soft ]; then
-  (cd demos/object_soft && find . -type f -print0) | while IFS= read -r -d '' f; do
-    if [ ! -e "$store/$f" ] || [ "$(wc -l < "demos/object_soft/$f")" -gt "$(wc -l < "$store/$f")" ]; then
-      mkdir -p "$(dirname "$store/$f")" && cp "demos/object_soft/$f" "$store/$f"
+if [ -d "demos/$SUITE" ]; then
+  (cd "demos/$SUITE" && find . -type f -print0) | while IFS= read -r -d '' f; do
+    if [ ! -e "$store/$f" ] || [ "$(wc -l < "demos/$SUITE/$f")" -gt "$(wc -l < "$store/$f")" ]; then
+      mkdir -p "$(dirname "$store/$f")" && cp "demos/$SUITE/$f" "$store/$f"
     fi
   done
 fi
 sync_back() {
-  mkdir -p demos/object_soft
+  mkdir -p "demos/$SUITE"
   (cd "$store" && find . \( -name manifest.json -o -name qc_report.json -o -name stats.json -o -name r_max_hist.png \
-      -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/object_soft/")
+      -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
 }
 trap sync_back EXIT
 for ((n = ROUND; n < NUM + ROUND; n += ROUND)); do
   k=$(( n < NUM ? n : NUM ))
-  "$PY" -m mani_skill_softvt.demos generate --suite object_soft --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
+  "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
     --out "$SOFTVT_DEMOS_DIR"
-  "$PY" -m mani_skill_softvt.demos stats --suite object_soft --out "$SOFTVT_DEMOS_DIR" || true
+  "$PY" -m mani_skill_softvt.demos stats --suite "$SUITE" --out "$SOFTVT_DEMOS_DIR" || true
   if [ "${RENDER_SIZE:-84x84}" != none ]; then
-    "$PY" -m mani_skill_softvt.demos render --suite object_soft --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
+    "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
       --workers "$WORKERS" --out "$SOFTVT_DEMOS_DIR"
   fi
   sync_back

@@ -7,6 +7,8 @@ machine, the cases that touch every layer and prints one SHA-256 per case (and p
   ManiSkill's full state vector (robot, actors, FEM nodes, sleep state), every observation
   array (tactile images and markers included), the reward and the evaluator's info, each step;
 - ``expert_rigid``: the same on the rigid twin (Object-Rigid task 3);
+  both expert cases also hash the simulation states alone (``states``), so that a change of what
+  is observed (a tactile model) is told from a change of the physics;
 - ``calibration_trial``: one calibration trial (asset 0, closure 0.6) on SoftGraspLift-v1;
 - ``record_<policy>``: the evaluator's record of a policy's first ID episode of task 0 (all
   fields but the wall time), e.g. a committed Diffusion Policy.
@@ -61,13 +63,15 @@ def expert_episode(env_id: str, task_id: int, seed: int) -> dict:
     from mani_skill_softvt.evaluation.policies import load_policy
     from mani_skill_softvt.rollout import Observer, rollout
 
-    steps = []
+    steps, states = [], []
 
     class StateHash(Observer):
         def on_reset(self, env, obs, info):
+            states.append(sha(env.unwrapped.get_state()))
             steps.append(sha([env.unwrapped.get_state(), obs]))
 
         def on_step(self, env, action, obs, info):
+            states.append(sha(env.unwrapped.get_state()))
             steps.append(sha([env.unwrapped.get_state(), obs, action, info]))
 
     env = gym.make(env_id, obs_mode="rgb+tactile", task_id=task_id,
@@ -76,7 +80,9 @@ def expert_episode(env_id: str, task_id: int, seed: int) -> dict:
         ep = rollout(env, load_policy("expert"), seed=seed, observers=[StateHash()])
     finally:
         env.close()
-    return {"steps": len(steps) - 1, "termination": ep.termination, "episode": sha(steps), "per_step": steps}
+    # "states": the simulation alone, to tell a change of what is observed from one of the physics.
+    return {"steps": len(steps) - 1, "termination": ep.termination, "episode": sha(steps), "per_step": steps,
+            "states": sha(states)}
 
 
 def calibration_trial() -> dict:
@@ -133,6 +139,9 @@ def main(argv=None) -> int:
             a, b = before[c].get("per_step", []), prints[c].get("per_step", [])
             first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
             print(f"DIFFERS: {c} (first at step {first}; {len(a)} against {len(b)} states)")
+            if "states" in before[c] and "states" in prints[c]:
+                same = before[c]["states"] == prints[c]["states"]
+                print(f"  its simulation states alone: {'identical (what differs is observed)' if same else 'differ'}")
         print("identical, bit for bit" if not differ else f"{len(differ)} case(s) differ")
         return 1 if differ else 0
     return 0

@@ -10,6 +10,7 @@ import trimesh
 from mani_skill_softvt.assets import ASSET_IDS, PROP_NAMES, TWIN_IDS, load_card, load_prop
 from mani_skill_softvt.assets.build import build_object, build_prop, pick_rest_face, stable_rest_pose
 from mani_skill_softvt.assets.cards import read_obj
+from mani_skill_softvt.assets.tetmesh import join_meshes
 from mani_skill_softvt.assets.tetmesh import box_tetmesh, surface_of_tets, tet_quality, tet_signed_volumes
 from mani_skill_softvt.paths import ASSETS_DIR
 
@@ -189,3 +190,12 @@ def test_read_obj_rejects_empty(tmp_path):
     p.write_text("# nothing\n")
     with pytest.raises(ValueError, match="no vertices"):
         read_obj(p)
+
+
+def test_join_meshes_renumbers_faces_and_keeps_dtypes():
+    a = (np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.int32))
+    b = (np.ones((4, 3), np.float32), np.array([[0, 1, 2], [1, 2, 3]], np.int32))
+    v, f = join_meshes([a, b])
+    assert v.dtype == np.float32 and f.dtype == np.int32  # the FEM's float32 nodes stay float32
+    np.testing.assert_array_equal(f, [[0, 1, 2], [3, 4, 5], [4, 5, 6]])
+    np.testing.assert_array_equal(v[f[1]], np.ones((3, 3)))

@@ -24,8 +24,10 @@ from mani_skill_softvt.baselines.features import robot_state, tactile_image
 from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.evaluation.policies import load_policy
 from mani_skill_softvt.physics.transforms import down_quat, down_rotvec
-from mani_skill_softvt.tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from mani_skill_softvt.tasks import constants as C
+from mani_skill_softvt.tasks.suites import SUITES
+
+TACTILE_MODEL_VERSION = SUITES["object_soft"].tactile_model  # the demos here are Object-Soft's
 
 TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), encoder_blocks=(1, 1),
             image_feature_dim=8, unet_dims=(8, 16), timestep_embed_dim=8, unet_groups=4, batch_size=4, steps=6,
@@ -225,7 +227,7 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
     # A package that renders or reads touch otherwise never reads an entry prepared by this one.
     vt = make_config("vt-c", **TINY)
     before = D.data_key(vt, tmp_path / "demos")
-    monkeypatch.setattr(D, "TACTILE_MODEL_VERSION", TACTILE_MODEL_VERSION + 1)
+    monkeypatch.setattr("mani_skill_softvt.tasks.suites.model_version", lambda deformable: TACTILE_MODEL_VERSION + 1)
     assert D.data_key(vt, tmp_path / "demos") != before
     (tmp_path / "old.npz").write_bytes(b"x")
     with pytest.raises(ValueError, match="older version"):
@@ -563,6 +565,13 @@ def test_touch_inputs_of_another_tactile_model_are_refused(tmp_path):
     torch.save(ckpt, tmp_path / "old.pt")
     with pytest.raises(ValueError, match="old.pt was trained on tactile frames of model 1"):
         load_policy(str(tmp_path / "old.pt"))
+    # Object-Soft's frames are not the rigid twins': the same file declared an Object-Rigid policy is refused.
+    ckpt["tactile_model"] = TACTILE_MODEL_VERSION
+    ckpt["config"]["suite"] = "object_rigid"
+    torch.save(ckpt, tmp_path / "rigid.pt")
+    assert SUITES["object_rigid"].tactile_model != TACTILE_MODEL_VERSION
+    with pytest.raises(ValueError, match=f"renders object_rigid's in model {SUITES['object_rigid'].tactile_model}"):
+        load_policy(str(tmp_path / "rigid.pt"))
 
 
 def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):

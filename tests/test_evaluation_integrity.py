@@ -193,7 +193,9 @@ def test_records_of_another_tactile_model_are_another_run(tmp_path):
     from mani_skill_softvt.evaluation.policies import PolicySource
     from mani_skill_softvt.evaluation.runner import run_records
     from mani_skill_softvt.fileio import append_jsonl
-    from mani_skill_softvt.tactile.constants import MODEL_VERSION
+    from mani_skill_softvt.tasks.suites import SUITES
+
+    MODEL_VERSION = SUITES["object_soft"].tactile_model
 
     out = tmp_path / "records.jsonl"
     base = {"suite": "object_soft", "condition": "id", "policy": "p.pt", "obs_mode": "rgb+tactile",

@@ -154,6 +154,22 @@ def test_pressure_indentation_follows_the_overlap_and_carries_the_force():
         pressure_indentation(gap, float("nan"), K, 1e-8)
 
 
+def test_balanced_indentation_keeps_a_rigid_face_s_shape_past_the_plane():
+    # A face tilted 0.2 deg (a cube twin's held face) that PhysX left 20 um past the pad: the gel
+    # carries the force as it would if the face rested on the plane. The shape sets the patch:
+    # strip width w = d / tan with d = sqrt(2 F tan / (K L)) (studies.twin_pinch.flat_face_patch).
+    pixel, tilt, force = 0.1e-3, np.radians(0.2), 1.0
+    x = (np.arange(160) + 0.5) * pixel
+    resting = np.tile(x * np.tan(tilt), (100, 1))
+    ind_rest, d_rest = balanced_indentation(resting, force, K, pixel ** 2)
+    ind_past, d_past = balanced_indentation(resting - 20e-6, force, K, pixel ** 2)
+    np.testing.assert_allclose(ind_past, ind_rest, rtol=0, atol=1e-12)
+    assert d_past == pytest.approx(d_rest - 20e-6, abs=1e-12)
+    d = np.sqrt(2 * force * np.tan(tilt) / (K * 100 * pixel))
+    assert ind_rest.max() == pytest.approx(d, abs=np.tan(tilt) * pixel)
+    assert (ind_rest[0] > 0).sum() * pixel == pytest.approx(d / np.tan(tilt), abs=pixel)
+
+
 def test_balanced_indentation_bottoms_out_at_the_gel_travel():
     gap = np.zeros((10, 10))
     ind, d = balanced_indentation(gap, 1e6, K, 1e-8)

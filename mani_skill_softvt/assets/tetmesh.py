@@ -62,6 +62,15 @@ def surface_of_tets(tets: np.ndarray) -> np.ndarray:
     return faces[counts[inverse.ravel()] == 1].astype(np.int32)
 
 
+def join_meshes(meshes) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh of several ``(vertices (N, 3), faces (M, k))``: faces renumbered into the joined
+    vertices (dtypes kept: the FEM's float32 nodes stay float32)."""
+    meshes = list(meshes)
+    offsets = np.cumsum([0] + [len(v) for v, _ in meshes[:-1]])
+    return (np.concatenate([np.asarray(v) for v, _ in meshes]),
+            np.concatenate([np.asarray(f) + int(o) for (_, f), o in zip(meshes, offsets)]))
+
+
 def tetrahedralize(mesh, resolution: int = 6, volume_correct: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Volumetric tet mesh of a watertight, star-shaped surface at hex ``resolution``.
 

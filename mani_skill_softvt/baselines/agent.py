@@ -22,7 +22,7 @@ import torch
 from ..evaluation.policies import PolicyKind, PolicySource
 from ..observations import NATIVE_CAMERA_SIZE, flatten_batch
 from ..policy import Policy
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
+from ..tasks.suites import get_suite
 from .config import DPConfig
 from .features import frame_features
 from .model import DiffusionPolicyModel, noise_scheduler
@@ -46,9 +46,11 @@ def read_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, d
                          "a checkpoint.pt is a training state: finish the run to get policy.pt")
     cfg = DPConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["config"].items()})
     trained_on = ckpt.get("tactile_model") or 1  # policy files from before the version was kept: 1
-    if cfg.tactile and trained_on != TACTILE_MODEL_VERSION:
-        raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders model "
-                         f"{TACTILE_MODEL_VERSION} (tactile.constants.MODEL_VERSION): its touch inputs would not be what it "
+    rendered = get_suite(cfg.suite).tactile_model
+    if cfg.tactile and trained_on != rendered:
+        raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders "
+                         f"{cfg.suite}'s in model {rendered} (tactile.constants.model_version): its touch inputs would "
+                         "not be what it "
                          "learned. Re-render the demos and retrain it (docs/baselines.md)")
     return cfg, ckpt
 

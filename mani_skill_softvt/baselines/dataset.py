@@ -46,9 +46,9 @@ from tqdm import tqdm
 
 from ..data.demo_set import DemoSet
 from ..data.trajectory import open_h5, tactile_model_of
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..fileio import atomic_write_json, read_json
 from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
+from ..tasks.suites import get_suite
 from .config import DPConfig
 from .features import FEATURES_VERSION, frame_features
 
@@ -130,7 +130,7 @@ def cache_key(cfg: DPConfig, sources: list[tuple[int, Path, Path]], heldout: boo
     grew, or files written again with the same episodes, keep the key: a training run resumes
     while step 1 of the campaign goes on. Renderings without digests are named by file."""
     fields = {k: getattr(cfg, k) for k in INPUT_FIELDS}
-    code = [CACHE_FORMAT, FEATURES_VERSION, TACTILE_MODEL_VERSION if cfg.tactile else None]
+    code = [CACHE_FORMAT, FEATURES_VERSION, get_suite(cfg.suite).tactile_model if cfg.tactile else None]
     return hashlib.sha256(json.dumps([[_episodes_read(cfg, a, b, heldout) for _, a, b in sources], fields, heldout,
                                       code], default=list).encode()).hexdigest()[:16]
 
@@ -171,9 +171,10 @@ def _plan_episodes(cfg: DPConfig, demos_root: Path, heldout: bool) -> tuple[list
             for name in split_episodes(_episode_names(ft), cfg, heldout, where=traj):
                 if name not in fr or "obs" not in fr[name]:
                     raise ValueError(f"{rendered}: no observations for {name} of {traj}; re-render task {task}")
-                if cfg.tactile and tactile_model_of(fr[name]) != TACTILE_MODEL_VERSION:
+                if cfg.tactile and tactile_model_of(fr[name]) != get_suite(cfg.suite).tactile_model:
                     raise ValueError(f"{rendered}:{name}: tactile frames of model {tactile_model_of(fr[name])}, this "
-                                     f"package renders model {TACTILE_MODEL_VERSION}; re-render with `python -m "
+                                     f"package renders {cfg.suite}'s in model {get_suite(cfg.suite).tactile_model}; "
+                                     f"re-render with `python -m "
                                      f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
                 obs = fr[name]["obs"]
                 n, steps = obs[TCP_POSE].shape[0], ft[name][_action_column(cfg)].shape[0]

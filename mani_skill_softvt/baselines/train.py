@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from ..fileio import atomic_write
 from ..paths import DEMOS_DIR, REPO_DIR
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
+from ..tasks.suites import get_suite
 from .config import (
     PRESETS,
     RECIPES,
@@ -153,7 +153,7 @@ class Training:
         """What a ``policy.pt`` (or a snapshot) holds: the config, the EMA weights at this step and
         what they were trained on."""
         return {"config": self.cfg.to_dict(), "model": self.policy_state(), "steps": self.step,
-                "tactile_model": TACTILE_MODEL_VERSION if self.cfg.tactile else None,
+                "tactile_model": get_suite(self.cfg.suite).tactile_model if self.cfg.tactile else None,
                 "episodes": windows.episodes, "samples": len(windows),
                 "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s,
                 "data_key": windows.key, "data_cache": None if windows.cache is None else str(windows.cache.resolve())}

@@ -26,7 +26,6 @@ import torch
 
 from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import nest
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..tasks.robot import (
     GRIPPER_ACTION_VERSION,
     GRIPPER_ACTION_VERSIONS,
@@ -186,7 +185,8 @@ def rendering_current(rendered_group, digest: str, needed: tuple[str, ...] = (),
 
 
 def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode,
-                    sensor_configs: dict | None = None, needed: tuple[str, ...] = (), progress=None) -> tuple[int, int]:
+                    sensor_configs: dict | None = None, needed: tuple[str, ...] = (), progress=None,
+                    tactile_model: int | None = None) -> tuple[int, int]:
     """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many
     episodes it holds and how many were rendered now.
 
@@ -205,7 +205,6 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
     problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
     if problem:
         raise CorruptDataError(problem)
-    tactile_model = TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
     n = rendered = 0
 
     def write(tmp: Path):

@@ -17,7 +17,6 @@ from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
 from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs
-from ..tactile.constants import MODEL_VERSION as TACTILE_MODEL_VERSION
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
 from .protocols import episodes
@@ -42,11 +41,6 @@ def policy_tag(spec: str) -> str:
 def records_stem(suite: str, protocol: str, spec: str) -> str:
     """The stem of an evaluation's files (records, report, plots): ``<suite>_<protocol>_<policy tag>``."""
     return f"{suite}_{protocol}_{policy_tag(spec)}"
-
-
-def tactile_model(obs_mode: str) -> int | None:
-    """The tactile model version of this package's frames in ``obs_mode`` (None without touch)."""
-    return TACTILE_MODEL_VERSION if "tactile" in obs_mode else None
 
 
 def recorded_camera_size(obs_mode: str, camera_size: tuple[int, int] | None) -> list[int] | None:
@@ -129,5 +123,5 @@ class RunConfig:
         """What names the run in each of its records (resume matches on these, and on
         ``policy_sha256``, which only a policy file's records carry)."""
         return {"policy": self.policy.spec, "obs_mode": self.obs_mode, "control_mode": self.control_mode,
-                "tactile_model": tactile_model(self.obs_mode),
+                "tactile_model": SUITES[self.suite].frames_tactile_model(self.obs_mode),
                 "camera_size": recorded_camera_size(self.obs_mode, self.camera_size)}

@@ -46,7 +46,7 @@ from ..tasks.suites import get_suite
 from ..version import __version__
 from .protocols import episode_key
 from .records import read_records, seal
-from .run import RunConfig, tactile_model
+from .run import RunConfig
 from .wrapper import make_env
 
 TERMINATIONS = ("success", "dropped", "timeout", "sim_unstable", "policy_error", "worker_died")
@@ -118,7 +118,7 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
     success = termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
-           "tactile_model": tactile_model(u.obs_mode), "camera_size": camera_size_of(u),
+           "tactile_model": get_suite(episode["suite"]).frames_tactile_model(u.obs_mode), "camera_size": camera_size_of(u),
            "termination": termination, "error": error,
            "success": success, "dsr_success": success and info_bool(info, "dsr_success"),
            "dropped": info_bool(info, "dropped"), "steps": steps, "r_max": float(env.r_max),

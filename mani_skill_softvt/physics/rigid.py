@@ -4,7 +4,10 @@ A rigid twin is simulated by SAPIEN/PhysX like any ManiSkill object (convex coll
 mass, friction, colour), so it costs what PickCube's cube costs and never deforms. The rest of
 the package (expert, success predicates, deformation metric, tactile sensor) reads objects as
 nodes: a twin's "nodes" are its soft asset's tet nodes carried by the body's pose, so D_t of a
-twin is zero up to float rounding, measured by the same metric as a soft object.
+twin is zero up to float rounding, measured by the same metric as a soft object. What the gel
+touches is another surface: the convex hulls PhysX cooked from the collision parts
+(:func:`collision_parts`), the surface PhysX actually keeps at the pad. The tet boundary can sit
+some 0.35 mm outside it, which would read as the whole pad pressed at any force.
 
 Pure functions (:func:`rigid_nodes`, :func:`rigid_node_velocities`, :func:`contact_wrench`) hold
 the maths; :class:`RigidObject` is the thin handle on the SAPIEN component.
@@ -16,7 +19,9 @@ from collections.abc import Iterable
 
 import numpy as np
 import sapien
+from scipy.spatial import ConvexHull
 
+from ..assets.tetmesh import join_meshes
 from .transforms import pose_wxyz_to_matrix
 
 
@@ -29,6 +34,21 @@ def rigid_nodes(rest_nodes: np.ndarray, pose7: np.ndarray) -> np.ndarray:
 def rigid_node_velocities(nodes: np.ndarray, com: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
     """Velocities (N, 3) of body points ``nodes`` (world): v = v_com + omega x (x - com)."""
     return np.asarray(linear, np.float64) + np.cross(np.asarray(angular, np.float64), np.asarray(nodes) - com)
+
+
+def collision_parts(component: sapien.physx.PhysxRigidBaseComponent) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Vertices (body frame) and triangles of each convex collision shape of ``component`` as
+    PhysX cooked it (a hull of at most 255 vertices, not the file's mesh). The triangles are the
+    convex hull's of the cooked vertices: PhysX's own triangulation of a hull polygon whose
+    vertices sit off its plane is not convex (0.2 mm of ridge across the cube twin's face)."""
+    parts = []
+    for shape in component.get_collision_shapes():
+        local = np.r_[shape.local_pose.p, shape.local_pose.q].astype(np.float64)
+        v = rigid_nodes(np.asarray(shape.get_vertices(), np.float64), local)
+        parts.append((v, ConvexHull(v).simplices))
+    if not parts:
+        raise ValueError(f"{component.entity.name}: a rigid twin without collision shapes has no surface to touch")
+    return parts
 
 
 def contact_wrench(points: Iterable[tuple[np.ndarray, np.ndarray]], dt: float, about: np.ndarray) -> np.ndarray:
@@ -54,6 +74,12 @@ class RigidObject:
         self.nominal_mass = float(mass)
         self._inertia = np.asarray(component.inertia, np.float64) * (self.nominal_mass / component.mass)
         self.scale_mass(1.0)
+        self.surface_parts = collision_parts(component)  # body frame; fixed
+        self._surface_vertices, self._surface_faces = join_meshes(self.surface_parts)
+
+    def surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """World vertices and triangles of the surface PhysX collides (:func:`collision_parts`, as one mesh)."""
+        return rigid_nodes(self._surface_vertices, self.pose7()), self._surface_faces
 
     @property
     def entity(self) -> sapien.Entity:

@@ -13,10 +13,12 @@ settled yaw (``align``, as calibration does, without its jitter). At hold step 1
 - the pad's normal force (the env's ``pad_normal_force``) and the patch the sensor reports (area
   in view, peak indentation);
 - the gel model's patch for a flat face at that tilt and force (:func:`flat_face_patch`; it takes
-  the hinge along the pad's length, as the yawed grasps tilt it: a tilt about pad x is an estimate);
-- PROTOTYPE of the proposed fix: the same gel model (force balance on a rigid surface) on the
-  hull PhysX actually collides, its cooked convex shapes, instead of the twin's tet boundary
-  the sensor renders today (which can sit past the pad, so the whole pad reads as pressed).
+  the hinge along the pad's length, as the yawed grasps tilt it: a tilt about pad x is an estimate).
+
+Since tactile model 3 the sensor touches a twin on the hull PhysX collides (its cooked convex
+shapes); model 2 rendered the twin's tet boundary, which sits some 0.35 mm outside that hull, so
+the whole pad in view read as pressed at any force (``twin_pinch_tactile_model2.md`` keeps those
+grasps). A result file of another tactile model is refused.
 
 and per grasp the object's turn and slip relative to the hand from the end of the close to the end
 of the hold. Writes ``<out>/twin_pinch.json`` (every grasp; a re-run skips those already there)
@@ -30,6 +32,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
@@ -41,12 +44,15 @@ from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import SIDES
 from ..paths import REPO_DIR
 from ..physics.constants import physics_signature, signature_mismatch
+from ..physics.rigid import rigid_nodes
 from ..physics.transforms import pose_wxyz_to_matrix, quat_wxyz_to_matrix, yaw_between
 from ..tactile import constants as TC
 from ..tactile.gel import foundation_stiffness
-from ..tactile.sensor import TactileSensor, world_to_pad
+from ..tactile.sensor import world_to_pad
 from ..tasks.constants import GEL_PAD_HALF_EXTENTS
+from ..tasks.suites import SUITES
 
+TACTILE_MODEL = SUITES["object_rigid"].tactile_model  # the version of the twins' frames
 HOLD_STEP = 10  # index in the hold (from 0): lifted and at rest in the grasp
 CUBE = {"rigid_stw_cube_hq": (0.4, 0.5, 0.7, 0.9)}
 # The light end of the soft cards' envelopes, where these twins pivot or slip (docs/limitations.md):
@@ -56,6 +62,7 @@ YAW_MODES = ("0", "align")
 PAD_WIDTH, PAD_LENGTH = 2 * GEL_PAD_HALF_EXTENTS[0], 2 * GEL_PAD_HALF_EXTENTS[1]  # m: across / along the finger
 VIEW_HEIGHT = min(PAD_LENGTH, TC.FOV_HEIGHT)  # m of the pad's length in view
 FACES = ("+x", "+y", "+z", "-x", "-y", "-z")
+HULL_GRID = 0.05e-3  # m: the pad sampled for the hull's own patch, finer than the sensor's 0.118 mm grid
 
 
 # ------------------------------------------------------------------------------ pure functions
@@ -76,6 +83,40 @@ def flat_face_patch(force: float, tilt: float, stiffness: float = foundation_sti
         d = np.sqrt(2 * force * t / (stiffness * length))
         return float(d / t * view_height), float(d)
     return float(width * view_height), float(force / (stiffness * length * width) + t * width / 2)
+
+
+def convex_gap(points_xy: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """Height (m) above the pad plane of the convex hull of ``vertices`` (pad frame, +z towards
+    the object) over each pad point ``points_xy`` (P, 2): the hull's lowest z on the vertical line
+    there, +inf where the line misses it. Exact for a convex body: on the line (x, y, z) the hull
+    is the z range every facet plane n.x + c <= 0 allows."""
+    eq = ConvexHull(vertices).equations  # (F, 4): outward n, offset c
+    n, c = eq[:, :3], eq[:, 3]
+    rhs = -(c[None, :] + points_xy @ n[:, :2].T)  # n_z z <= rhs for each facet
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = rhs / n[None, :, 2]
+    below = n[:, 2] < 0  # facets facing the pad bound z from below
+    lo = np.max(np.where(below[None, :], bound, -np.inf), axis=1)
+    hi = np.min(np.where(n[None, :, 2] > 0, bound, np.inf), axis=1)
+    side = np.all(np.where(n[None, :, 2] == 0, rhs >= 0, True), axis=1)  # walls parallel to the line
+    return np.where((lo <= hi) & side, lo, np.inf)
+
+
+def winkler_patch(gap: np.ndarray, in_view: np.ndarray, force: float, pixel_area: float,
+                  stiffness: float = foundation_stiffness()) -> tuple[float, float]:
+    """(area m^2, peak indentation m) in view (``in_view`` mask) of a rigid surface of ``gap`` map
+    (m, +inf: none) pressed with ``force`` (N) into a Winkler gel: the sink d with K a sum(max(0, d - gap)) = F,
+    by bisection (the sensor solves the same balance in closed form on its own grid)."""
+    finite = gap[np.isfinite(gap)]
+    if force <= 0.0 or finite.size == 0:
+        return 0.0, 0.0
+    lo, hi = finite.min(), finite.min() + force / (stiffness * pixel_area)  # hi: one pixel carries it all
+    for _ in range(200):
+        d = 0.5 * (lo + hi)
+        lo, hi = (d, hi) if stiffness * pixel_area * np.maximum(d - finite, 0.0).sum() < force else (lo, d)
+    d = 0.5 * (lo + hi)
+    pressed = (d - gap > 0) & in_view
+    return float(pressed.sum() * pixel_area), float((d - gap[pressed]).max()) if pressed.any() else 0.0
 
 
 def nearest_face_tilt(shape_rotation: np.ndarray, pad_rotation: np.ndarray) -> dict:
@@ -101,49 +142,48 @@ def grasp_key(r: dict) -> tuple:
 
 # ------------------------------------------------------------------------ the simulator's side
 
-def cooked_hull(body) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The twin's collision shapes as PhysX cooked them: (vertices in the body frame, triangles)."""
-    out = []
-    for shape in body.component.get_collision_shapes():
-        local = pose_wxyz_to_matrix(np.r_[shape.local_pose.p, shape.local_pose.q])
-        v = np.asarray(shape.get_vertices(), np.float64)
-        out.append((v @ local[:3, :3].T + local[:3, 3], np.asarray(shape.get_triangles())))
-    return out
-
-
-def pad_snapshot(u, body, side: str, frame, hull, gel: TactileSensor) -> dict:
-    """One pad now: the face's tilt, the force, the sensor's patch (``frame``), the flat-face
-    prediction, and the gel model on the cooked ``hull`` (the fix's prototype)."""
+def pad_snapshot(u, body, side: str, frame) -> dict:
+    """One pad now: the face's tilt, the force, the sensor's patch (``frame``) and the flat-face prediction."""
     pose = u.pad_pose(side)
     force = u.pad_normal_force(side, pose)
     body_pose = pose_wxyz_to_matrix(body.pose7())
     shape_rotation = body_pose[:3, :3] @ quat_wxyz_to_matrix(np.asarray(u.objects.specs["object"].rest_pose)[3:])
     tilt = nearest_face_tilt(shape_rotation, pose[:3, :3])
     area, peak = flat_face_patch(force, np.radians(tilt["tilt_deg"]))
-    world = [v @ body_pose[:3, :3].T + body_pose[:3, 3] for v, _ in hull]
-    offsets = np.cumsum([0] + [len(v) for v in world])
-    ind, _ = gel.indentation(world_to_pad(np.concatenate(world), pose),
-                             np.concatenate([t + o for (_, t), o in zip(hull, offsets)]), force, deformable=False)
+    hull_area, hull_peak = hull_patch([world_to_pad(rigid_nodes(v, body.pose7()), pose) for v, _ in body.surface_parts],
+                                      force)
     return {**tilt, "force_n": force, "sensor_area_mm2": 1e6 * float(frame.contact.sum()) * TC.PIXEL_SIZE ** 2,
             "sensor_peak_um": 1e6 * float(frame.depth.max()), "flat_face_area_mm2": 1e6 * area,
-            "flat_face_peak_um": 1e6 * peak,
-            "prototype_cooked_hull_area_mm2": 1e6 * float((ind > 0).sum()) * gel.grid_pixel ** 2,
-            "prototype_cooked_hull_peak_um": 1e6 * float(ind.max())}
+            "flat_face_peak_um": 1e6 * peak, "hull_area_mm2": 1e6 * hull_area, "hull_peak_um": 1e6 * hull_peak}
 
 
-def run_grasp(env, asset: str, closure: float, seed: int, yaw_mode: str, gel: TactileSensor) -> dict:
+def hull_patch(parts_pad: list[np.ndarray], force: float) -> tuple[float, float]:
+    """:func:`winkler_patch` over the whole pad of the union of convex parts (each part's
+    vertices in the pad frame): the lowest of the parts' :func:`convex_gap` at each point."""
+    xs = np.arange(-PAD_WIDTH / 2 + HULL_GRID / 2, PAD_WIDTH / 2, HULL_GRID)
+    ys = np.arange(-PAD_LENGTH / 2 + HULL_GRID / 2, PAD_LENGTH / 2, HULL_GRID)
+    gx, gy = np.meshgrid(xs, ys)
+    points = np.stack([gx.ravel(), gy.ravel()], 1)
+    gap = np.full(len(points), np.inf)
+    for vertices in parts_pad:
+        for k in range(0, len(points), 8192):  # chunks: points x facets stays small
+            gap[k:k + 8192] = np.minimum(gap[k:k + 8192], convex_gap(points[k:k + 8192], vertices))
+    return winkler_patch(gap, np.abs(gy.ravel()) <= VIEW_HEIGHT / 2, force, HULL_GRID ** 2)
+
+
+def run_grasp(env, asset: str, closure: float, seed: int, yaw_mode: str) -> dict:
     """Reset ``env`` (a twin's) to ``seed``, grasp, lift and hold; the grasp's record."""
     env.reset(seed=seed)
     u = env.unwrapped
     body = u.objects.bodies["object"]
     object_yaw = yaw_between(u.rest_vertices("object"), u.settled_nodes("object"))
     yaw = object_yaw if yaw_mode == "align" else float(yaw_mode)
-    hull, pads, object_quat = cooked_hull(body), {}, {}
+    pads, object_quat = {}, {}
 
     def on_step(phase, i, n):
         if phase == "hold" and i == HOLD_STEP:
             frames = u.tactile_frames()
-            pads.update({side: pad_snapshot(u, body, side, frames[side], hull, gel) for side in SIDES})
+            pads.update({side: pad_snapshot(u, body, side, frames[side]) for side in SIDES})
         if i == n - 1:
             object_quat[phase] = body.pose7()[3:]
 
@@ -158,14 +198,17 @@ def run_grasp(env, asset: str, closure: float, seed: int, yaw_mode: str, gel: Ta
 
 def run(plan: dict, seeds, yaw_modes, path: Path) -> list[dict]:
     """Every (asset, closure, seed, yaw mode) of ``plan`` not yet in ``path``; all grasps there."""
-    done = read_json(path) if path.exists() else {"physics": physics_signature(), "grasps": []}
+    done = (read_json(path) if path.exists() else
+            {"physics": physics_signature(), "tactile_model": TACTILE_MODEL, "grasps": []})
     stale = signature_mismatch(done.get("physics"))
+    if done.get("tactile_model", 2) != TACTILE_MODEL:  # files from before the key was kept are model 2's
+        stale.append(f"tactile model {done.get('tactile_model', 2)}, this package renders twins in {TACTILE_MODEL}")
     if stale:
-        raise ValueError(f"{path} holds grasps run under other physics ({'; '.join(stale)}); move it away to re-run")
+        raise ValueError(f"{path} holds grasps run under other physics or touch ({'; '.join(stale)}); "
+                         "move it away to re-run")
     have = {grasp_key(r) for r in done["grasps"]}
     todo = [(a, g, s, y) for a, closures in plan.items() for g in closures for s in seeds for y in yaw_modes
             if (a, round(g, 6), s, y) not in have]
-    gel = TactileSensor("left", pad_half_extents=GEL_PAD_HALF_EXTENTS)  # the gel model alone (either side)
     env, env_asset = None, None
     try:
         for a, g, s, y in tqdm(todo, desc="twin pinch", unit="grasp"):
@@ -174,7 +217,7 @@ def run(plan: dict, seeds, yaw_modes, path: Path) -> list[dict]:
                     env.close()
                 env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=a)
                 env_asset = a
-            done["grasps"].append(run_grasp(env, a, g, s, y, gel))
+            done["grasps"].append(run_grasp(env, a, g, s, y))
             done["grasps"].sort(key=grasp_key)
             write(done, path)
     finally:
@@ -192,19 +235,19 @@ def pair(r: dict, key: str, fmt: str) -> str:
 def format_tables(grasps: list[dict]) -> str:
     lines = [f"Rigid twins in the scripted pinch at hold step {HOLD_STEP}; per pad left / right. "
              "Tilt: the face nearest the pad against the pad plane. Flat face: the gel model for a flat face at that "
-             "tilt and force. Cooked hull: PROTOTYPE of the proposed fix (the gel model on the hull PhysX collides). "
-             "Turn, slip: the object relative to the hand, end of close to end of hold."]
+             f"tilt and force. Hull: the same gel balance on the twin's PhysX hull, computed apart from the sensor "
+             f"(convex_gap, winkler_patch). Sensor: tactile model {TACTILE_MODEL}. Turn, slip: the object relative to the hand, end of close to end of hold."]
     for asset in sorted({r["asset"] for r in grasps}):
         lines += ["", f"### {asset}", "",
                   "| closure | grasp yaw | seed | object yaw deg | tilt deg | F N | sensor mm^2 | sensor peak um "
-                  "| flat face mm^2 | flat face peak um | cooked hull mm^2 (prototype) | cooked hull peak um (prototype) "
-                  "| turn deg | slip mm | lifted |", "|" + "---|" * 15]
+                  "| flat face mm^2 | flat face peak um | hull mm^2 | hull peak um | turn deg | slip mm | lifted |",
+                  "|" + "---|" * 15]
         for r in (r for r in grasps if r["asset"] == asset):
             lines.append(f"| {r['closure']} | {r['yaw_mode']} | {r['seed']} | {r['object_yaw_deg']:.2f} | "
                          f"{pair(r, 'tilt_deg', '.2f')} | {pair(r, 'force_n', '.2f')} | {pair(r, 'sensor_area_mm2', '.0f')} | "
                          f"{pair(r, 'sensor_peak_um', '.0f')} | {pair(r, 'flat_face_area_mm2', '.0f')} | "
-                         f"{pair(r, 'flat_face_peak_um', '.0f')} | {pair(r, 'prototype_cooked_hull_area_mm2', '.0f')} | "
-                         f"{pair(r, 'prototype_cooked_hull_peak_um', '.0f')} | {r['turn_deg']:.2f} | {r['slip_mm']:.2f} | "
+                         f"{pair(r, 'flat_face_peak_um', '.0f')} | {pair(r, 'hull_area_mm2', '.0f')} | "
+                         f"{pair(r, 'hull_peak_um', '.0f')} | {r['turn_deg']:.2f} | {r['slip_mm']:.2f} | "
                          f"{r['lifted']} |")
     return "\n".join(lines) + "\n"
 

@@ -88,5 +88,14 @@ SHEAR_DECAY = 12.0  # px (~0.7 mm)
 
 # The tactile model's version. Renderings, baselines trained on them and evaluation records carry
 # it, so that frames of one model are never mixed with another's (data saved without it is 1).
-# 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's outward flow.
-MODEL_VERSION = 2
+# 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's outward flow;
+# 3: a rigid twin is touched on the hull PhysX collides, not its tet boundary (which sat outside
+#    the hull: the whole pad read as pressed). Soft objects' frames did not change from 2 to 3,
+#    so a soft scene's frames keep 2 and what was rendered or trained on them stays valid.
+MODEL_VERSION = 3
+SOFT_MODEL_VERSION = 2  # the last version that changed how an FEM surface is rendered
+
+
+def model_version(deformable: bool) -> int:
+    """The tactile model version of frames of deformable (FEM) or rigid-twin objects."""
+    return SOFT_MODEL_VERSION if deformable else MODEL_VERSION

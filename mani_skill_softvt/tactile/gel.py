@@ -16,9 +16,12 @@ gel plane per pixel, +inf where nothing is within reach. Three situations:
   face, domed under a round one).
 - **A rigid object pressed with a known force** (:func:`balanced_indentation`). Its surface
   cannot deform, so the gel alone conforms: it sinks by a common depth d wherever the object is
-  within d of the plane, ``indentation = clip(d - max(gap, 0), 0, travel)``, with d chosen so
-  that the gel carries F. A sphere gives a disc whose radius grows as F^(1/4)
-  (F = k pi R d^2, a^2 = 2 R d).
+  within d of the plane, ``indentation = clip(d - gap, 0, travel)``, with d chosen so that the
+  gel carries F. A sphere gives a disc whose radius grows as F^(1/4) (F = k pi R d^2, a^2 = 2 R d).
+  Where the simulator left the body a little past the plane (PhysX's contact slop, tens of
+  micrometres) its surface keeps its shape: the load depends on the shape and the force, not on
+  where the rigid solver stopped (clamping the gap at the plane flattened a face tilted 0.2 degrees
+  into a level one).
 
 The gel itself is a thin layer bonded to a rigid backing: an elastic (Winkler) foundation of
 stiffness ``k = (1 - nu) E / ((1 + nu)(1 - 2 nu) h)`` per unit area (Johnson, *Contact
@@ -103,7 +106,7 @@ def balanced_indentation(gap: np.ndarray, force: float, stiffness: float, pixel_
     if force <= 0.0 or not finite.any():
         return out, 0.0
     target = force / (stiffness * pixel_area)  # sum of indentations over pixels (m)
-    vals = np.maximum(g[finite], 0.0)
+    vals = g[finite]  # not clamped at the plane (module docstring)
     # Only pixels within one travel of the closest point can carry load before it bottoms out.
     near = np.sort(vals[vals < vals.min() + travel])
     # Without the travel clamp the load is piecewise linear in d with kinks at the sorted gaps:

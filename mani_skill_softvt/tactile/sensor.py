@@ -190,7 +190,7 @@ class TactileSensor:
             depth = cv2.resize(grid, (C.IMAGE_WIDTH, C.IMAGE_HEIGHT), interpolation=cv2.INTER_LINEAR)
             touching = cv2.resize(touching.view(np.uint8), (C.IMAGE_WIDTH, C.IMAGE_HEIGHT),
                                   interpolation=cv2.INTER_NEAREST).astype(bool)
-        shear_px, twist, centre = self._patch_motion(v, f, max(sink, 0.0))
+        shear_px, twist, centre = self._patch_motion(v, f, sink)  # 0 but for a rigid surface
         # The marker field on the gel grid (its fields are smooth at that scale): positions and
         # lengths scale by 1 / downsample.
         k = self.downsample

@@ -20,7 +20,7 @@ from mani_skill.utils.common import to_numpy
 
 from ..assets.cards import read_obj
 from ..assets.materials import SoftMaterial
-from ..assets.tetmesh import embed_points, surface_of_tets, vertex_normals
+from ..assets.tetmesh import embed_points, join_meshes, surface_of_tets, vertex_normals
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.fem import SimulationInstabilityError, SoftBodyWorld, vbd_schedule
@@ -89,7 +89,6 @@ class SceneObjects:
     def __init__(self, specs: list[ObjectSpec], scene):
         self.specs = {s.name: s for s in specs}
         self.scene = scene
-        self.boundary = {n: surface_of_tets(s.tets) for n, s in self.specs.items()}
 
     def connect(self, robot, table, props: list[PropCollider]) -> None:
         """The robot, the table and the props are in the scene: couple the objects to them."""
@@ -141,6 +140,10 @@ class SceneObjects:
         raise NotImplementedError
 
     def material(self, name: str) -> dict[str, float | None]:
+        raise NotImplementedError
+
+    def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """World vertices and triangles of every object's surface the gel pads touch, as one mesh."""
         raise NotImplementedError
 
     @property
@@ -251,6 +254,10 @@ class RigidTwins(SceneObjects):
     def material(self, name: str) -> dict[str, float | None]:
         return {"youngs_modulus": None, "mass": self.bodies[name].mass}
 
+    def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """The hulls PhysX collides (not the tet boundary, which can sit outside them)."""
+        return join_meshes([body.surface() for body in self.bodies.values()])
+
     def check_state_dict(self, state: dict) -> None:
         if "soft" in state:
             raise ValueError("this state holds FEM soft-body values but the scene's objects are rigid twins (PhysX "
@@ -266,6 +273,7 @@ class FEMObjects(SceneObjects):
     def __init__(self, specs: list[ObjectSpec], scene, sleeping: bool = True):
         super().__init__(specs, scene)
         self.sleeping = sleeping
+        self.boundary = {n: surface_of_tets(s.tets) for n, s in self.specs.items()}  # what the gel touches
         self.index = {s.name: i for i, s in enumerate(specs)}  # Newton body index
         self.world: SoftBodyWorld | None = None
         self.coupling: SapienNewtonCoupling | None = None
@@ -386,6 +394,10 @@ class FEMObjects(SceneObjects):
 
     def contact_wrenches(self, links: tuple[str, ...]) -> dict[str, np.ndarray]:
         return {name: self.coupling.wrench(name) for name in links}
+
+    def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """The deformed FEM boundaries (the finer visual meshes are embedded and may sit slightly outside)."""
+        return join_meshes([(self.nodes(name), self.boundary[name]) for name in self.specs])
 
     def material(self, name: str) -> dict[str, float | None]:
         h = self.world.soft_bodies[self.index[name]]

@@ -307,16 +307,9 @@ class SoftBodyEnv(BaseEnv):
 
     # ------------------------------------------------------------------ tactile
     def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
-        """World vertices and faces of every object's deformed FEM boundary: the surface the pads
-        actually touch (the finer visual mesh is embedded and may sit slightly outside it). For
-        rigid twins: the same boundary carried by the body's pose."""
-        verts, faces, offset = [], [], 0
-        for name in self.objects.specs:
-            nodes = self.objects.nodes(name)
-            verts.append(nodes)
-            faces.append(self.objects.boundary[name] + offset)
-            offset += len(nodes)
-        return np.concatenate(verts), np.concatenate(faces)
+        """World vertices and faces of the surface the pads touch: every object's deformed FEM
+        boundary, or a rigid twin's hulls as PhysX collides them (``SceneObjects.contact_surface``)."""
+        return self.objects.contact_surface()
 
     def pad_pose(self, side: str) -> np.ndarray:
         """4x4 world pose of the ``side`` finger's gel surface (tactile pad frame, see tactile.sensor)."""
@@ -331,12 +324,12 @@ class SoftBodyEnv(BaseEnv):
         return max(0.0, -float(self.objects.contact_wrenches((link,))[link][:3] @ normal))
 
     def tactile_contact_reference(self, side: str) -> np.ndarray:
-        """Evaluator-only reference for the ``side`` sensor: (240, 320) bool, the objects' FEM
-        surface at or past the pad within the gel's view, by exact polygon clipping
+        """Evaluator-only reference for the ``side`` sensor: (240, 320) bool, the objects' contact
+        surface (:meth:`contact_surface`) at or past the pad within the gel's view, by exact polygon clipping
         (tactile.geometry.contact_polygons), which the rendered patch is checked against. A rigid
-        twin does not reach past the pad (PhysX keeps it on the face); its reference is its
-        surface at or past the gel sunk by the last frame's force-balanced depth (the geometric
-        contact of a rigid indenter with the gel)."""
+        twin barely reaches past the pad (PhysX keeps it on the face, up to its contact slop); its
+        reference is its surface at or past the gel sunk by the last frame's force-balanced depth
+        (the geometric contact of a rigid indenter with the gel)."""
         nodes, faces = self.contact_surface()
         sensor = self._tactile[side]
         local = world_to_pad(nodes, self.pad_pose(side))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assets.cards import twin_id
+from ..tactile.constants import model_version
 from .constants import NOMINAL_LIGHT_INTENSITY
 
 # task id -> (soft asset id, object words in the Object suites, side and words in the Spatial suites)
@@ -41,6 +42,15 @@ class Suite:
     def target(self) -> str:
         """The prop objects are placed in or on."""
         return "basket" if self.layout == "object" else "plate"
+
+    @property
+    def tactile_model(self) -> int:
+        """The tactile model version of this suite's frames (tactile.constants.model_version)."""
+        return model_version(deformable=not self.rigid)
+
+    def frames_tactile_model(self, obs_mode: str) -> int | None:
+        """The tactile model version of this suite's observations in ``obs_mode`` (None without touch)."""
+        return self.tactile_model if "tactile" in obs_mode else None
 
     def task_env_id(self, task_id: int) -> str:
         """The env id that names one task of the suite, e.g. ``SoftVTObjectSoft-Task3-v1``: for tools
