@@ -681,6 +681,33 @@ def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
         report.main([str(path), str(path), "--out", str(tmp_path)])
 
 
+def test_results_pair_a_soft_suite_with_its_rigid_twin_on_the_shared_seeds(tmp_path):
+    # The paper's rigid-twin comparison: each variant trained on each suite, paired on the seeds
+    # both suites draw (evaluation.protocols.seed_key); never across variants.
+    from mani_skill_softvt.evaluation.records import record_hash
+    from mani_skill_softvt.studies import results as report
+
+    def rec(suite, variant, seed, success):
+        r = {"suite": suite, "task_id": 0, "condition": "id", "seed": seed, "success": success, "dsr_success": success,
+             "r_max": 0.5, "termination": "success" if success else "timeout", "tau_o": 0.01,
+             "receipt": {"policy": f"diffusion_policy[{variant}]"}, "policy": f"{variant}-{suite}.pt",
+             "policy_sha256": "a" * 64, "deformation_trace": [0.0, 0.005]}
+        return {**r, "record_sha256": record_hash(r)}
+
+    rows = [rec("object_soft", "vo-c,cpu", i, i < 3) for i in range(6)]
+    rows += [rec("object_rigid", "vo-c,cpu", i, i < 5) for i in range(1, 8)]  # seeds 1-5 shared with soft
+    rows += [rec("object_rigid", "vt-c,cpu", i, True) for i in range(6)]
+    path = tmp_path / "r.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    pairs = report.main([str(path), "--out", str(tmp_path)])["comparisons"]
+    twin = pairs["id: object_soft vo-c,cpu (vo-c_cpu-object_soft) vs object_rigid vo-c,cpu (vo-c_cpu-object_rigid)"]
+    # Seeds 1-5 pair: both succeed on 1, 2; only the rigid one on 3, 4; neither on 5.
+    c = twin["success"]
+    assert (c["pairs"], c["both"], c["only_a"], c["only_b"], c["neither"]) == (5, 2, 0, 2, 1)
+    assert c["p_value"] == pytest.approx(0.5) and c["unpaired"] == 1 + 2
+    assert not any("object_soft vo-c" in k and "vt-c" in k for k in pairs)
+
+
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):
     from mani_skill_softvt.baselines import export as E
     from mani_skill_softvt.baselines.model import DiffusionPolicyModel

@@ -135,12 +135,13 @@ def mcnemar_exact_p(only_a: int, only_b: int) -> float:
     return min(1.0, 2 * tail)
 
 
-def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success") -> dict:
-    """Two policies on the same episodes (matched by suite, task, condition and seed): how many
+def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success", key=episode_key) -> dict:
+    """Two policies on the same episodes (matched by ``key``: suite, task, condition and seed; a
+    suite and its twin pair on ``protocols.seed_key``): how many
     pairs both / only A / only B / neither got ``outcome`` (``success`` or ``dsr_success``), the difference of rates with its exact McNemar p-value. Pairing
     removes the seed-to-seed spread that two independent intervals carry; episodes only one
     policy ran are left out and counted."""
-    a_by, b_by = {episode_key(r): r for r in a}, {episode_key(r): r for r in b}
+    a_by, b_by = {key(r): r for r in a}, {key(r): r for r in b}
     if len(a_by) < len(a) or len(b_by) < len(b):
         raise ValueError("an episode (suite, task, condition, seed) appears twice in one policy's records")
     common = sorted(set(a_by) & set(b_by))

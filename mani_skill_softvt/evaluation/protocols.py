@@ -33,3 +33,9 @@ def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EP
 
 def episode_key(ep: dict) -> tuple:
     return (ep["suite"], int(ep["task_id"]), ep["condition"], int(ep["seed"]))
+
+
+def seed_key(ep: dict) -> tuple:
+    """An episode's place in its protocol, whichever objects: a soft suite and its rigid twin
+    draw the same seeds (:func:`episodes`), so their episodes pair on this."""
+    return (int(ep["task_id"]), ep["condition"], int(ep["seed"]))

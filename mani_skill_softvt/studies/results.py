@@ -13,7 +13,9 @@ blown-up FEM: harm that TSR - DSR cannot show when a policy never succeeds) and 
 collapsed, and the paper's
 numbers for the same configuration. Then TSR / DSR per task side by side, and every two of
 today's variants compared on the episodes both ran (the protocol's seeds are the same for every
-policy, so the comparison is paired: exact McNemar p-values). ``<out>/success_traces.png`` draws
+policy, so the comparison is paired: exact McNemar p-values), and each variant on a soft suite
+against the same variant trained on its rigid twin suite, paired on the seeds both draw (the
+paper's rigid-twin comparison). ``<out>/success_traces.png`` draws
 the R_t traces of each variant's successes, within and beyond the tolerance (the paper's
 qualitative figure). Records given with ``--legacy`` (made under an older physics or sensor) are
 rows of their own, marked ``[old physics]``, never pooled with today's nor compared with them.
@@ -28,12 +30,12 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
-from ..evaluation.protocols import episode_key
+from ..evaluation.protocols import episode_key, seed_key
 from ..evaluation.records import read_records
 from ..evaluation.report import rt_series
 from ..evaluation.run import policy_tag
 from ..fileio import atomic_write, atomic_write_json
-from ..tasks.suites import task_spec
+from ..tasks.suites import get_suite, task_spec
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
 # variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
@@ -118,8 +120,9 @@ def per_task_lines(groups: dict) -> list[str]:
 
 
 def comparisons(groups: dict) -> dict[str, dict]:
-    """Every two of today's variants of one suite and protocol, paired on their common episodes:
-    TSR and DSR."""
+    """Every two of today's variants of one suite and protocol, paired on their common episodes,
+    and each variant on a soft suite against the same variant (its own training) on the rigid
+    twin suite, paired on the shared seeds (the paper's rigid-twin comparison): TSR and DSR."""
     out = {}
     today = sorted(k for k in groups if not is_legacy(k))
     for a, b in itertools.combinations(today, 2):
@@ -127,7 +130,18 @@ def comparisons(groups: dict) -> dict[str, dict]:
             pair = {o: paired_comparison(groups[a], groups[b], o) for o in ("success", "dsr_success")}
             if pair["success"]["pairs"]:
                 out[f"{a[0]}/{a[1]}: {a[2]} vs {b[2]}"] = pair
+    for soft in (k for k in today if not get_suite(k[0]).rigid):
+        for rigid in (k for k in today if k[0] == get_suite(soft[0]).twin and k[1] == soft[1]):
+            if variant_name(soft[2]) == variant_name(rigid[2]):
+                pair = {o: paired_comparison(groups[soft], groups[rigid], o, seed_key) for o in ("success", "dsr_success")}
+                if pair["success"]["pairs"]:
+                    out[f"{soft[1]}: {soft[0]} {soft[2]} vs {rigid[0]} {rigid[2]}"] = pair
     return out
+
+
+def variant_name(label: str) -> str:
+    """A row label's variant and recipe (``vo-c,cpu`` of ``vo-c,cpu vo-c-cpu.pt``)."""
+    return label.split(" ")[0]
 
 
 def comparison_lines(pairs: dict[str, dict]) -> list[str]:

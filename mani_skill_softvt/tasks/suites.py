@@ -52,6 +52,11 @@ class Suite:
         """The tactile model version of this suite's observations in ``obs_mode`` (None without touch)."""
         return self.tactile_model if "tactile" in obs_mode else None
 
+    @property
+    def twin(self) -> str:
+        """The suite of the same layout with the other objects (Object-Soft <-> Object-Rigid)."""
+        return next(s.name for s in SUITES.values() if s.layout == self.layout and s.rigid != self.rigid)
+
     def task_env_id(self, task_id: int) -> str:
         """The env id that names one task of the suite, e.g. ``SoftVTObjectSoft-Task3-v1``: for tools
         that take an env id and no env kwargs (ManiSkill's baselines' ``--env-id``)."""
