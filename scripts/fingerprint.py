@@ -67,12 +67,14 @@ def expert_episode(env_id: str, task_id: int, seed: int) -> dict:
 
     class StateHash(Observer):
         def on_reset(self, env, obs, info):
-            states.append(sha(env.unwrapped.get_state()))
-            steps.append(sha([env.unwrapped.get_state(), obs]))
+            state = env.unwrapped.get_state()
+            states.append(sha(state))
+            steps.append(sha([state, obs]))
 
         def on_step(self, env, action, obs, info):
-            states.append(sha(env.unwrapped.get_state()))
-            steps.append(sha([env.unwrapped.get_state(), obs, action, info]))
+            state = env.unwrapped.get_state()
+            states.append(sha(state))
+            steps.append(sha([state, obs, action, info]))
 
     env = gym.make(env_id, obs_mode="rgb+tactile", task_id=task_id,
                    sensor_configs=dict(width=64, height=64))

@@ -10,8 +10,7 @@ import trimesh
 from mani_skill_softvt.assets import ASSET_IDS, PROP_NAMES, TWIN_IDS, load_card, load_prop
 from mani_skill_softvt.assets.build import build_object, build_prop, pick_rest_face, stable_rest_pose
 from mani_skill_softvt.assets.cards import read_obj
-from mani_skill_softvt.assets.tetmesh import join_meshes
-from mani_skill_softvt.assets.tetmesh import box_tetmesh, surface_of_tets, tet_quality, tet_signed_volumes
+from mani_skill_softvt.assets.tetmesh import box_tetmesh, join_meshes, surface_of_tets, tet_quality, tet_signed_volumes
 from mani_skill_softvt.paths import ASSETS_DIR
 
 

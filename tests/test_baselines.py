@@ -565,6 +565,13 @@ def test_touch_inputs_of_another_tactile_model_are_refused(tmp_path):
     torch.save(ckpt, tmp_path / "old.pt")
     with pytest.raises(ValueError, match="old.pt was trained on tactile frames of model 1"):
         load_policy(str(tmp_path / "old.pt"))
+    # Nor evaluated on a suite whose touch is rendered in another model (the rigid twins', 3).
+    from mani_skill_softvt.evaluation.run import RunConfig
+
+    RunConfig.resolve(str(path), suite="object_soft")
+    with pytest.raises(ValueError, match=f"model {TACTILE_MODEL_VERSION}, and suite object_rigid renders model "
+                                         f"{SUITES['object_rigid'].tactile_model}"):
+        RunConfig.resolve(str(path), suite="object_rigid")
     # Object-Soft's frames are not the rigid twins': the same file declared an Object-Rigid policy is refused.
     ckpt["tactile_model"] = TACTILE_MODEL_VERSION
     ckpt["config"]["suite"] = "object_rigid"

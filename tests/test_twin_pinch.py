@@ -121,7 +121,10 @@ def test_cube_twin_firm_grasp_shows_the_patch_of_its_hull(yaw_mode):
     assert r["lifted"]
     grid_px = TC.PIXEL_SIZE * TC.GEL_GRID_DOWNSAMPLE  # the sensor's gel grid
     for side, pad in r["pads"].items():
-        assert (pad["tilt_deg"] < 1.0) if yaw_mode == "align" else (2.0 < pad["tilt_deg"] < 5.0), side
+        # Aligned, the face lies flat; at the default heading the cube keeps the yaw it settled with
+        # (friction-locked in the pinch, docs/limitations.md), so its face is that far off the pad.
+        expected_tilt = 0.0 if yaw_mode == "align" else abs(r["object_yaw_deg"])
+        assert pad["tilt_deg"] == pytest.approx(expected_tilt, abs=1.0), side
         # The drive's limit binds here; the contact impulses of the last tick read it to within
         # a mN or so (10.0005 N measured), hence 1 %.
         assert 0.0 < pad["force_n"] <= 1.01 * GRIPPER_FORCE_LIMIT, side

@@ -49,8 +49,8 @@ def read_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, d
     rendered = get_suite(cfg.suite).tactile_model
     if cfg.tactile and trained_on != rendered:
         raise ValueError(f"{path} was trained on tactile frames of model {trained_on}, and this package renders "
-                         f"{cfg.suite}'s in model {rendered} (tactile.constants.model_version): its touch inputs would "
-                         "not be what it "
+                         f"{cfg.suite}'s in model {rendered} (tactile.constants.model_version): its touch inputs "
+                         "would not be what it "
                          "learned. Re-render the demos and retrain it (docs/baselines.md)")
     return cfg, ckpt
 
@@ -121,7 +121,8 @@ def resolve_policy_file(spec: str | Path) -> tuple[PolicySource, DPConfig, dict]
     cfg, ckpt = read_policy_file(Path(spec), data)
     obs_mode, control_mode = required_modes(cfg)
     source = PolicySource(str(spec), PolicyFiles.name, sha256=hashlib.sha256(data).hexdigest(), obs_modes=(obs_mode,),
-                          control_modes=(control_mode,), camera_size=camera_render_size(ckpt))
+                          control_modes=(control_mode,), camera_size=camera_render_size(ckpt),
+                          tactile_model=(ckpt.get("tactile_model") or 1) if cfg.tactile else None)
     return source, cfg, ckpt
 
 

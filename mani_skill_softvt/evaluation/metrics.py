@@ -143,7 +143,8 @@ def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success", ke
     policy ran are left out and counted."""
     a_by, b_by = {key(r): r for r in a}, {key(r): r for r in b}
     if len(a_by) < len(a) or len(b_by) < len(b):
-        raise ValueError("an episode (suite, task, condition, seed) appears twice in one policy's records")
+        raise ValueError("an episode appears twice in one policy's records (the same suite, task, condition and "
+                         "seed; or, paired across twin suites, the same task, condition and seed)")
     common = sorted(set(a_by) & set(b_by))
     counts = {"both": 0, "only_a": 0, "only_b": 0, "neither": 0}
     for k in common:

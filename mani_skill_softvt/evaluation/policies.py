@@ -41,7 +41,9 @@ IMAGE_OBS_MODES = ("rgb", "rgb+tactile")
 class PolicySource:
     """A policy spec, resolved (module docstring). ``obs_modes`` / ``control_modes``: those it can
     run in (None: any; the first is its default), ``camera_size``: (height, width) it was trained
-    on (None: the env's native size); ``sha256``: of its file, for a policy that is one."""
+    on (None: the env's native size); ``sha256``: of its file, for a policy that is one;
+    ``tactile_model``: the tactile model of the frames it learned from (None: it reads no touch,
+    or nothing is known of its training)."""
 
     spec: str
     kind: str
@@ -49,6 +51,7 @@ class PolicySource:
     obs_modes: tuple[str, ...] | None = None
     control_modes: tuple[str, ...] | None = None
     camera_size: tuple[int, int] | None = None
+    tactile_model: int | None = None
 
     def load(self) -> Policy:
         return policy_kind(self.kind).load(self)

@@ -95,6 +95,12 @@ class RunConfig:
         camera_sensor_configs(camera_size)  # a size too small is an error here, naming it, not in a worker
         if suite not in SUITES:
             raise ValueError(f"suite '{suite}': choose one of {sorted(SUITES)}")
+        frames = SUITES[suite].frames_tactile_model(obs_mode)
+        if source.tactile_model is not None and frames is not None and frames != source.tactile_model:
+            # Soft and rigid suites render touch in different models (tactile.constants.model_version).
+            raise ValueError(f"policy {spec} learned from tactile frames of model {source.tactile_model}, and suite "
+                             f"{suite} renders model {frames}: evaluate it on a suite of its model, or train one "
+                             f"on {suite}'s demos")
         tasks = tuple(range(NUM_TASKS)) if tasks in ("all", ["all"], ("all",)) else tuple(int(t) for t in tasks)
         if not tasks or any(not 0 <= t < NUM_TASKS for t in tasks):
             raise ValueError(f"task ids must be in [0, {NUM_TASKS - 1}], got {list(tasks)}")

@@ -2,7 +2,7 @@
 
 A rigid twin is simulated by SAPIEN/PhysX like any ManiSkill object (convex collision parts,
 mass, friction, colour), so it costs what PickCube's cube costs and never deforms. The rest of
-the package (expert, success predicates, deformation metric, tactile sensor) reads objects as
+the package (expert, success predicates, deformation metric) reads objects as
 nodes: a twin's "nodes" are its soft asset's tet nodes carried by the body's pose, so D_t of a
 twin is zero up to float rounding, measured by the same metric as a soft object. What the gel
 touches is another surface: the convex hulls PhysX cooked from the collision parts
@@ -43,8 +43,12 @@ def collision_parts(component: sapien.physx.PhysxRigidBaseComponent) -> list[tup
     vertices sit off its plane is not convex (0.2 mm of ridge across the cube twin's face)."""
     parts = []
     for shape in component.get_collision_shapes():
+        if not isinstance(shape, sapien.physx.PhysxCollisionShapeConvexMesh):
+            raise ValueError(f"{component.entity.name}: a rigid twin's collision parts are convex meshes, "
+                             f"got a {type(shape).__name__}")
         local = np.r_[shape.local_pose.p, shape.local_pose.q].astype(np.float64)
-        v = rigid_nodes(np.asarray(shape.get_vertices(), np.float64), local)
+        # get_vertices() is the unscaled mesh (ManiSkill's trimesh_utils scales it the same way).
+        v = rigid_nodes(np.asarray(shape.get_vertices(), np.float64) * np.asarray(shape.scale, np.float64), local)
         parts.append((v, ConvexHull(v).simplices))
     if not parts:
         raise ValueError(f"{component.entity.name}: a rigid twin without collision shapes has no surface to touch")

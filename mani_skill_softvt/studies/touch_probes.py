@@ -37,7 +37,7 @@ from ..data.trajectory import episode_digest, open_h5, rendering_current
 from ..fileio import atomic_write, atomic_write_json
 from ..observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
 from ..paths import DEMOS_DIR, REPO_DIR
-from ..tasks.suites import NUM_TASKS
+from ..tasks.suites import NUM_TASKS, get_suite
 
 SLIP_SPEED = 1e-3  # m/s: an object moving 0.05 mm per 50-ms step relative to the fingers slips
 CONTACT_FORCE = 0.05  # N on each pad: both pads press on the object
@@ -165,7 +165,8 @@ def episode_frames(trajectory_group, rendered_group) -> dict[str, np.ndarray]:
 def load_frames(demos_root: Path, suite: str, tasks: list[int], camera_size, heldout_fraction: float) -> dict:
     """Every frame of the rendered demos, with a ``heldout`` flag (the last demos of each task) and
     the episode index (for the validation split). Only episodes whose rendering is current are
-    read (a demo set still being rendered has fewer); ``skipped`` counts the others."""
+    read (a demo set still being rendered has fewer, an older one frames of another tactile model);
+    ``skipped`` counts the others."""
     demo_set = DemoSet(demos_root, suite)
     sources = demo_set.rendered_sources(tasks, "rgb+tactile", camera_size)
     out: dict[str, list] = {}
@@ -174,7 +175,8 @@ def load_frames(demos_root: Path, suite: str, tasks: list[int], camera_size, hel
         for src in sources:
             with open_h5(src.trajectory_h5) as ft, open_h5(src.rendered_h5) as fr:
                 names = [k for k in sorted(ft.keys(), key=lambda k: int(k.split("_")[1]))
-                         if k in fr and rendering_current(fr[k], episode_digest(ft[k]))]
+                         if k in fr and rendering_current(fr[k], episode_digest(ft[k]),
+                                                          tactile_model=get_suite(suite).tactile_model)]
                 skipped += len(ft.keys()) - len(names)
                 if len(names) < 2:
                     raise ValueError(f"{src.rendered_h5}: {len(names)} rendered demos; probes need at least 2 a task "

@@ -13,16 +13,18 @@ settled yaw (``align``, as calibration does, without its jitter). At hold step 1
 - the pad's normal force (the env's ``pad_normal_force``) and the patch the sensor reports (area
   in view, peak indentation);
 - the gel model's patch for a flat face at that tilt and force (:func:`flat_face_patch`; it takes
-  the hinge along the pad's length, as the yawed grasps tilt it: a tilt about pad x is an estimate).
+  the hinge along the pad's length, as the yawed grasps tilt it: a tilt about pad x is an estimate);
+- the same gel balance on the twin's hull as PhysX holds it (:func:`hull_patch`), solved apart
+  from the sensor on a finer grid: what the sensor's patch should be;
+
+and per grasp the object's turn and slip relative to the hand from the end of the close to the end
+of the hold. Writes ``<out>/twin_pinch.json`` (every grasp; a re-run skips those already there)
+and ``twin_pinch.md`` (one table per asset, one row per grasp).
 
 Since tactile model 3 the sensor touches a twin on the hull PhysX collides (its cooked convex
 shapes); model 2 rendered the twin's tet boundary, which sits some 0.35 mm outside that hull, so
 the whole pad in view read as pressed at any force (``twin_pinch_tactile_model2.md`` keeps those
 grasps). A result file of another tactile model is refused.
-
-and per grasp the object's turn and slip relative to the hand from the end of the close to the end
-of the hold. Writes ``<out>/twin_pinch.json`` (every grasp; a re-run skips those already there)
-and ``twin_pinch.md`` (one table per asset, one row per grasp).
 """
 
 from __future__ import annotations
