@@ -94,14 +94,16 @@ def convex_gap(points_xy: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     is the z range every facet plane n.x + c <= 0 allows."""
     eq = ConvexHull(vertices).equations  # (F, 4): outward n, offset c
     n, c = eq[:, :3], eq[:, 3]
-    rhs = -(c[None, :] + points_xy @ n[:, :2].T)  # n_z z <= rhs for each facet
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = rhs / n[None, :, 2]
-    below = n[:, 2] < 0  # facets facing the pad bound z from below
-    lo = np.max(np.where(below[None, :], bound, -np.inf), axis=1)
-    hi = np.min(np.where(n[None, :, 2] > 0, bound, np.inf), axis=1)
-    side = np.all(np.where(n[None, :, 2] == 0, rhs >= 0, True), axis=1)  # walls parallel to the line
-    return np.where((lo <= hi) & side, lo, np.inf)
+    out = np.empty(len(points_xy))
+    for k in range(0, len(points_xy), 8192):  # chunks: points x facets stays small
+        rhs = -(c[None, :] + points_xy[k:k + 8192] @ n[:, :2].T)  # n_z z <= rhs for each facet
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = rhs / n[None, :, 2]
+        lo = np.max(np.where(n[None, :, 2] < 0, bound, -np.inf), axis=1)  # facets facing the pad: from below
+        hi = np.min(np.where(n[None, :, 2] > 0, bound, np.inf), axis=1)
+        side = np.all(np.where(n[None, :, 2] == 0, rhs >= 0, True), axis=1)  # walls parallel to the line
+        out[k:k + 8192] = np.where((lo <= hi) & side, lo, np.inf)
+    return out
 
 
 def winkler_patch(gap: np.ndarray, in_view: np.ndarray, force: float, pixel_area: float,
@@ -166,10 +168,7 @@ def hull_patch(parts_pad: list[np.ndarray], force: float) -> tuple[float, float]
     ys = np.arange(-PAD_LENGTH / 2 + HULL_GRID / 2, PAD_LENGTH / 2, HULL_GRID)
     gx, gy = np.meshgrid(xs, ys)
     points = np.stack([gx.ravel(), gy.ravel()], 1)
-    gap = np.full(len(points), np.inf)
-    for vertices in parts_pad:
-        for k in range(0, len(points), 8192):  # chunks: points x facets stays small
-            gap[k:k + 8192] = np.minimum(gap[k:k + 8192], convex_gap(points[k:k + 8192], vertices))
+    gap = np.min([convex_gap(points, vertices) for vertices in parts_pad], axis=0)
     return winkler_patch(gap, np.abs(gy.ravel()) <= VIEW_HEIGHT / 2, force, HULL_GRID ** 2)
 
 
