@@ -9,5 +9,8 @@ these read its policies, records and demos and write the campaign's reports:
 - :mod:`.touch_probes`: what the tactile and camera streams carry of force and deformation (linear probes);
 - :mod:`.recipe_search`: the training recipes ranked by open-loop error, then closed loop;
 - :mod:`.openloop`: a trained policy's held-out open-loop action error;
-- :mod:`.twin_pinch`: how rigid twins sit in the scripted pinch and what the tactile model shows of it.
+- :mod:`.twin_pinch`: how rigid twins sit in the scripted pinch and what the tactile model shows of it;
+- :mod:`.binary_close`: what a binary close (against the force limit) does to each object against its tolerance;
+- :mod:`.findings`: the paper's four findings tested on the Object suites, each marked supported,
+  contradicted or unresolved.
 """

@@ -235,6 +235,45 @@ def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
     atomic_write(out, lambda p: fig.savefig(p, format="png", dpi=120))
 
 
+def load_runs(paths: list[Path], twins: Path | None = None, twins_required: bool = True) -> tuple[dict, dict]:
+    """Each OOD records file with its policy's ID records (``<suite>_id_<policy>.jsonl`` beside
+    it), keyed by variant, and with ``twins`` the ID twins re-run in that directory: ``(runs,
+    twins_from)`` as :func:`analyse` takes them (without ``twins_required``, a variant whose twins
+    have not run yet is left out of ``twins_from``). A missing, empty or mismatched file is a
+    ValueError naming it and what to do."""
+    runs, twins_from = {}, {}
+    for path in paths:
+        if not path.is_file():
+            raise ValueError(f"{path} does not exist")
+        if "_ood_" not in path.name:
+            raise ValueError(f"{path}: not an OOD records file (<suite>_ood_<policy>.jsonl)")
+        ood = read_records(path)
+        if not ood:
+            raise ValueError(f"{path} holds no records")
+        id_path = path.with_name(path.name.replace("_ood_", "_id_"))
+        if not id_path.is_file():
+            raise ValueError(f"{path}: its ID records {id_path} are missing; evaluate the policy on the ID protocol first")
+        id_records = read_records(id_path)
+        shas = {single_run(ood, path), single_run(id_records, id_path)}
+        if len(shas) > 1:
+            raise ValueError(f"{path} and {id_path} were made with different policy files (their policy_sha256 differ)")
+        variant = variant_of(ood[0])
+        if variant in runs:
+            raise ValueError(f"two files of variant {variant}: {path} and another; report one run of each")
+        runs[variant] = (ood, id_records)
+        if twins is not None:
+            twin_path = twins / id_path.name
+            if not twin_path.is_file() and not twins_required:
+                continue
+            if not twin_path.is_file():
+                raise ValueError(f"--twins: {twin_path} does not exist; run the ID twins there first (docs/baselines.md)")
+            twin_records = read_records(twin_path)
+            if single_run(twin_records, twin_path) not in shas:
+                raise ValueError(f"{twin_path} was made with another policy file than {path}")
+            twins_from[variant] = twin_records
+    return runs, twins_from
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("ood", nargs="+", type=Path, help="OOD records files (<suite>_ood_<policy>.jsonl)")
@@ -242,39 +281,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--twins", type=Path, default=None, metavar="DIR",
                     help="read the ID twins from DIR/<suite>_id_<policy>.jsonl (re-run on the OOD episodes' machine)")
     args = ap.parse_args(argv)
-    runs, twins_from = {}, {}
-    for path in args.ood:
-        if not path.is_file():
-            ap.error(f"{path} does not exist")
-        if "_ood_" not in path.name:
-            ap.error(f"{path}: not an OOD records file (<suite>_ood_<policy>.jsonl)")
-        ood = read_records(path)
-        if not ood:
-            ap.error(f"{path} holds no records")
-        id_path = path.with_name(path.name.replace("_ood_", "_id_"))
-        if not id_path.is_file():
-            ap.error(f"{path}: its ID records {id_path} are missing; evaluate the policy on the ID protocol first")
-        id_records = read_records(id_path)
-        try:
-            shas = {single_run(ood, path), single_run(id_records, id_path)}
-        except ValueError as e:
-            ap.error(str(e))
-        if len(shas) > 1:
-            ap.error(f"{path} and {id_path} were made with different policy files (their policy_sha256 differ)")
-        if variant_of(ood[0]) in runs:
-            ap.error(f"two files of variant {variant_of(ood[0])}: {path} and another; report one run of each")
-        runs[variant_of(ood[0])] = (ood, id_records)
-        if args.twins is not None:
-            twin_path = args.twins / id_path.name
-            if not twin_path.is_file():
-                ap.error(f"--twins: {twin_path} does not exist; run the ID twins there first (docs/baselines.md)")
-            twins = read_records(twin_path)
-            try:
-                if single_run(twins, twin_path) not in shas:
-                    ap.error(f"{twin_path} was made with another policy file than {path}")
-            except ValueError as e:
-                ap.error(str(e))
-            twins_from[variant_of(ood[0])] = twins
+    try:
+        runs, twins_from = load_runs(args.ood, args.twins)
+    except ValueError as e:
+        ap.error(str(e))
     result = analyse(runs, twins_from)
     text = build(result)
     atomic_write(args.out / "ood.md", lambda p: p.write_text(text))

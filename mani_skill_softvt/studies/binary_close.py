@@ -1,0 +1,122 @@
+"""What a binary close does to each object against its tolerance (the findings campaign's step 4).
+
+    python -m mani_skill_softvt.studies.binary_close --demos /root/binary-close --seeds 10
+
+A binary gripper action has two values: open, or close until the fingers stall against the 10 N
+force limit (``pd_ee_pose_binary``, as the release's binary action). The scripted expert runs
+its own plan on the first ``--seeds`` training seeds of every task with its gripper made binary
+(``demos generate --control-mode pd_ee_pose_binary``, resumable: episodes already screened are
+kept), and each episode's screening says whether the task succeeded, whether the object left its
+tolerance (R_max > 1, a collapsed tet) and its R_max. The same seeds' continuous expert (the
+committed QC logs, ``--continuous``) stands beside it. Writes ``<out>/binary_close.md`` and
+``.json``.
+
+What it tells: an object that a binary close pushes past its tolerance on every seed cannot be
+carried within it by any binary policy that grasps as the expert does, so a binary variant's
+DSR on it is bounded by this table, however well the policy learns.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..data.demo_set import DemoSet
+from ..fileio import atomic_write, atomic_write_json, read_json
+from ..tasks.suites import NUM_TASKS, task_spec
+
+FAILED = ("not successful at the last step", "object dropped")
+
+
+def screened(verdict: dict) -> dict:
+    """One screening record's outcomes: task success, within tolerance, both (DSR's success), R_max."""
+    problems = verdict.get("problems", [])
+    success = not any(p in FAILED for p in problems)
+    within = verdict["r_max"] is not None and verdict["r_max"] <= 1.0 and not any(p.startswith("a tet collapsed") for p in problems)
+    return {"success": success, "within": within, "dsr_success": success and within, "r_max": verdict["r_max"]}
+
+
+def task_row(binary: list[dict], continuous: list[dict]) -> dict:
+    """A task's binary-close outcomes on its seeds, the continuous expert's R_max on the same seeds."""
+    outs = [screened(v) for v in binary]
+    r = np.array([o["r_max"] for o in outs if o["r_max"] is not None], float)
+    seeds = {v["seed"] for v in binary}
+    cont = np.array([v["r_max"] for v in continuous if v["seed"] in seeds and v.get("r_max") is not None], float)
+    return {"episodes": len(outs), "successes": sum(o["success"] for o in outs),
+            "within_tolerance": sum(o["within"] for o in outs), "dsr_successes": sum(o["dsr_success"] for o in outs),
+            "r_max_median": float(np.median(r)) if r.size else None,
+            "r_max_range": (float(r.min()), float(r.max())) if r.size else None,
+            "continuous_r_max_median": float(np.median(cont)) if cont.size else None, "continuous_episodes": int(cont.size)}
+
+
+def analyse(binary: DemoSet, continuous: DemoSet) -> dict:
+    manifest = read_json(binary.manifest) if binary.manifest.is_file() else {}
+    if not manifest.get("control_mode", "").endswith("_binary"):
+        raise ValueError(f"{binary.manifest}: not a binary-gripper generation (control mode "
+                         f"{manifest.get('control_mode')!r}); run this study with --seeds N to generate one")
+    rows = {}
+    for t in range(NUM_TASKS):
+        verdicts = binary.verdicts(t)
+        if verdicts:
+            rows[t] = {"asset": task_spec(binary.suite, t).asset_id, **task_row(verdicts, continuous.verdicts(t))}
+    if not rows:
+        raise ValueError(f"{binary.dir}: no screened episodes; run this study with --seeds N to generate them")
+    n = sum(r["episodes"] for r in rows.values())
+    succ = sum(r["successes"] for r in rows.values())
+    dsr = sum(r["dsr_successes"] for r in rows.values())
+    never = [f"task {t} ({r['asset']})" for t, r in rows.items() if r["successes"] and not r["dsr_successes"]]
+    summary = (f"of {n} episodes, {succ} succeed and {dsr} within tolerance (TSR {100 * succ / n:.0f} %, DSR "
+               f"{100 * dsr / n:.0f} %); no seed within tolerance on {', '.join(never) if never else 'no task'}.")
+    return {"suite": binary.suite, "control_mode": manifest["control_mode"], "tasks": rows, "episodes": n,
+            "successes": succ, "dsr_successes": dsr, "summary": summary}
+
+
+def build(result: dict) -> str:
+    def fmt(x, spec=".2f"):
+        return "-" if x is None else format(x, spec)
+
+    lines = [f"# A binary close against each object's tolerance ({result['suite']}, {result['control_mode']})", "",
+             "The scripted expert's plan with its gripper made binary: close means drive the fingers shut until "
+             "they stall against the 10 N force limit. R_max = D_max / tau_o over the episode; the continuous "
+             "expert (its calibrated closure) on the same seeds beside it.", "",
+             "| task (object) | episodes | task successes | within tolerance | both (DSR) | R_max median [min, max] "
+             "| continuous expert R_max median |", "|---|---|---|---|---|---|---|"]
+    for t, r in result["tasks"].items():
+        rng = f" [{r['r_max_range'][0]:.2f}, {r['r_max_range'][1]:.2f}]" if r["r_max_range"] else ""
+        lines.append(f"| {t} ({r['asset']}) | {r['episodes']} | {r['successes']} | {r['within_tolerance']} | "
+                     f"{r['dsr_successes']} | {fmt(r['r_max_median'])}{rng} | {fmt(r['continuous_r_max_median'])} |")
+    lines += ["", f"In all: {result['summary']}"]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.binary_close", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--demos", type=Path, required=True, help="where the binary-gripper episodes go (a store of their own)")
+    ap.add_argument("--suite", default="object_soft")
+    ap.add_argument("--seeds", type=int, default=None, metavar="N",
+                    help="generate (or resume) the first N training seeds of every task first")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--continuous", type=Path, default=Path("demos"),
+                    help="demos root holding the continuous expert's QC logs (default: the checkout's demos/)")
+    ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    args = ap.parse_args(argv)
+    if args.seeds is not None:
+        from ..demos import generate  # the expert and its planner: only when generating
+        generate(args.suite, list(range(NUM_TASKS)), args.seeds, args.demos, workers=args.workers,
+                 control_mode="pd_ee_pose_binary")
+    try:
+        result = analyse(DemoSet(args.demos, args.suite), DemoSet(args.continuous, args.suite))
+    except ValueError as e:
+        ap.error(str(e))
+    text = build(result)
+    atomic_write(args.out / "binary_close.md", lambda p: p.write_text(text))
+    atomic_write_json(args.out / "binary_close.json", result)
+    print(text)
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,35 @@
+"""studies/binary_close.py on hand-written screening logs: what counts as a success, as within tolerance."""
+
+import json
+
+import pytest
+
+from mani_skill_softvt.studies import binary_close as B
+
+
+def _log(root, suite, task, lines, control_mode="pd_ee_pose_binary"):
+    d = root / suite / f"task{task}"
+    d.mkdir(parents=True, exist_ok=True)
+    (root / suite / "manifest.json").write_text(json.dumps({"control_mode": control_mode}))
+    (d / "qc.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+
+
+def test_a_binary_close_is_scored_by_the_screening_and_set_beside_the_continuous_expert(tmp_path):
+    binary = [{"seed": 0, "r_max": 1.03, "problems": ["R_max 1.030 > 1"]},             # carried, squeezed past
+              {"seed": 1, "r_max": 0.97, "problems": []},                              # carried within
+              {"seed": 2, "r_max": 0.99, "problems": ["a tet collapsed (1 at most) in 3 states"]},
+              {"seed": 3, "r_max": 0.50, "problems": ["object dropped"]}]
+    _log(tmp_path / "bin", "object_soft", 0, binary)
+    _log(tmp_path / "cont", "object_soft", 0, [{"seed": s, "r_max": 0.2 + 0.1 * s, "problems": []} for s in range(6)],
+         control_mode="pd_ee_pose")
+    result = B.main(["--demos", str(tmp_path / "bin"), "--continuous", str(tmp_path / "cont"), "--out", str(tmp_path)])
+    row = result["tasks"][0]
+    assert (row["episodes"], row["successes"], row["within_tolerance"], row["dsr_successes"]) == (4, 3, 2, 1)
+    assert row["continuous_r_max_median"] == pytest.approx(0.35) and row["continuous_episodes"] == 4  # seeds 0-3 only
+    assert (tmp_path / "binary_close.md").read_text().count("| 0 (") == 1
+
+
+def test_a_continuous_generation_is_refused(tmp_path):
+    _log(tmp_path, "object_soft", 0, [{"seed": 0, "r_max": 0.3, "problems": []}], control_mode="pd_ee_pose")
+    with pytest.raises(SystemExit):
+        B.main(["--demos", str(tmp_path), "--out", str(tmp_path)])
