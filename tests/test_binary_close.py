@@ -33,3 +33,12 @@ def test_a_continuous_generation_is_refused(tmp_path):
     _log(tmp_path, "object_soft", 0, [{"seed": 0, "r_max": 0.3, "problems": []}], control_mode="pd_ee_pose")
     with pytest.raises(SystemExit):
         B.main(["--demos", str(tmp_path), "--out", str(tmp_path)])
+
+
+def test_the_calibration_percentile_that_would_cover_a_binary_close():
+    # A sweep whose peak D grows with the closure: 0.3 never holds, from 0.4 on every repeat holds.
+    records = [{"closure": g, "held": g >= 0.4, "peak_deformation": 10 * g + 0.1 * k}
+               for g in (0.3, 0.4, 0.6, 0.8, 1.0) for k in range(3)]
+    out = B.sweep_at_full_close(records, tau_o=9.0, peak_d=8.15)
+    assert out["sweep_r_at_closure_1"] == pytest.approx(10.1 / 9.0)  # median of 10.0, 10.1, 10.2
+    assert out["covering_percentile"] == pytest.approx(100 * 8 / 12)  # all of 0.4 and 0.6, 8.0 and 8.1 of 0.8
