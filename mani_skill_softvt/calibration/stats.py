@@ -39,6 +39,17 @@ def by_closure(records: list[dict]) -> dict[float, list[dict]]:
     return dict(sorted(groups.items()))
 
 
+def stable_grasps(records: list[dict]) -> tuple[float, list[dict]]:
+    """g_min (the loosest closure where every repeat holds) and the stable grasps: the held trials
+    at closures >= g_min. Raises ValueError when no closure holds in every repeat."""
+    groups = by_closure(records)
+    holding = [g for g, rs in groups.items() if all(r["held"] for r in rs)]
+    if not holding:
+        raise ValueError("no closure held in every repeat: widen the sweep towards tighter closures")
+    g_min = holding[0]
+    return g_min, [r for g, rs in groups.items() if g >= g_min for r in rs if r["held"]]
+
+
 def gripper_envelope(records: list[dict], percentile: float = 90.0) -> dict:
     """g_min, g_max, tau_o and the apertures from sweep records (see the module docstring).
 
@@ -49,11 +60,7 @@ def gripper_envelope(records: list[dict], percentile: float = 90.0) -> dict:
     if not 0.0 < percentile <= 100.0:
         raise ValueError(f"percentile must be in (0, 100], got {percentile}")
     groups = by_closure(records)
-    holding = [g for g, rs in groups.items() if all(r["held"] for r in rs)]
-    if not holding:
-        raise ValueError("no closure held in every repeat: widen the sweep towards tighter closures")
-    g_min = holding[0]
-    stable = [r for g, rs in groups.items() if g >= g_min for r in rs if r["held"]]
+    g_min, stable = stable_grasps(records)
     tau = float(np.percentile([r["peak_deformation"] for r in stable], percentile))
     within = [g for g, rs in groups.items()
               if g >= g_min and all(r["held"] and r["peak_deformation"] <= tau for r in rs)]

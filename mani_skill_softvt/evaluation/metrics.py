@@ -135,6 +135,26 @@ def mcnemar_exact_p(only_a: int, only_b: int) -> float:
     return min(1.0, 2 * tail)
 
 
+def paired_difference_ci(both: int, only_a: int, only_b: int, neither: int,
+                         z: float = 1.959963984540054) -> tuple[float, float]:
+    """95 % interval of the paired difference of rates (only_a - only_b) / pairs: Newcombe's hybrid
+    score interval for paired data (his method 10, Stat. Med. 1998): each policy's Wilson interval,
+    joined with the correlation of the pairs. It stays inside [-1, 1] and behaves at the small
+    discordant counts where the Wald interval collapses. No pairs: (0, 0)."""
+    n = both + only_a + only_b + neither
+    if n == 0:
+        return (0.0, 0.0)
+    p1, p2 = (both + only_a) / n, (both + only_b) / n
+    l1, u1 = wilson_interval(both + only_a, n, z)
+    l2, u2 = wilson_interval(both + only_b, n, z)
+    den = (both + only_a) * (only_b + neither) * (both + only_b) * (only_a + neither)
+    phi = (both * neither - only_a * only_b) / math.sqrt(den) if den else 0.0
+    d = p1 - p2
+    lower = math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2))
+    upper = math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2))
+    return (d - lower, d + upper)
+
+
 def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success", key=episode_key) -> dict:
     """Two policies on the same episodes (matched by ``key``: suite, task, condition and seed; a
     suite and its twin pair on ``protocols.seed_key``): how many
@@ -153,4 +173,5 @@ def paired_comparison(a: list[dict], b: list[dict], outcome: str = "success", ke
     n = len(common)
     return {"pairs": n, **counts, "unpaired": len(a_by) + len(b_by) - 2 * n,
             "difference": (counts["only_a"] - counts["only_b"]) / n if n else 0.0,
+            "difference_ci95": paired_difference_ci(counts["both"], counts["only_a"], counts["only_b"], counts["neither"]),
             "p_value": mcnemar_exact_p(counts["only_a"], counts["only_b"])}

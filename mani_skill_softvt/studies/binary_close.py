@@ -10,8 +10,8 @@ kept), and each episode's screening says whether the task succeeded, whether the
 tolerance (R_max > 1, a collapsed tet) and its R_max. The same seeds' continuous expert (the
 committed QC logs, ``--continuous``) stands beside it, and so does the calibration sweep's own
 grasp at closure 1.0 (the card's records): its peak D against tau_o, and the share of the sweep's
-stable grasps whose peak D stays below the binary close's (the calibration percentile at which a
-binary close would be within tolerance). Writes ``<out>/binary_close.md`` and ``.json``.
+stable grasps' peak D below which the binary close's lies (the lowest calibration percentile
+whose tau_o a binary close would stay within). Writes ``<out>/binary_close.md`` and ``.json``.
 
 What it tells: an object that a binary close pushes past its tolerance on every seed cannot be
 carried within it by any binary policy that grasps as the expert does, so a binary variant's
@@ -26,20 +26,25 @@ from pathlib import Path
 import numpy as np
 
 from ..calibration.cards import load_calibration_card
-from ..calibration.stats import by_closure
+from ..calibration.stats import by_closure, stable_grasps
 from ..data.demo_set import DemoSet
 from ..fileio import atomic_write, atomic_write_json, read_json
-from ..tasks.suites import NUM_TASKS, task_spec
+from ..tasks.suites import NUM_TASKS, SUITES, task_spec
 
-FAILED = ("not successful at the last step", "object dropped")
+# The screening's problems that concern the tolerance alone (data/trajectory.py: episode_problems);
+# any other (not successful, dropped, NaN, no plan) is a failed task.
+TOLERANCE_PROBLEMS = ("R_max ", "a tet collapsed")
 
 
 def screened(verdict: dict) -> dict:
-    """One screening record's outcomes: task success, within tolerance, both (DSR's success), R_max."""
+    """One screening record's outcomes: task success, within tolerance, both (DSR's success), R_max
+    (None when not finite: a blown-up FEM)."""
     problems = verdict.get("problems", [])
-    success = not any(p in FAILED for p in problems)
-    within = verdict["r_max"] is not None and verdict["r_max"] <= 1.0 and not any(p.startswith("a tet collapsed") for p in problems)
-    return {"success": success, "within": within, "dsr_success": success and within, "r_max": verdict["r_max"]}
+    r = verdict.get("r_max")
+    r = float(r) if r is not None and np.isfinite(r) else None
+    success = all(p.startswith(TOLERANCE_PROBLEMS) for p in problems)
+    within = r is not None and r <= 1.0 and not any(p.startswith("a tet collapsed") for p in problems)
+    return {"success": success, "within": within, "dsr_success": success and within, "r_max": r}
 
 
 def task_row(binary: list[dict], continuous: list[dict]) -> dict:
@@ -57,22 +62,23 @@ def task_row(binary: list[dict], continuous: list[dict]) -> dict:
 
 def sweep_at_full_close(records: list[dict], tau_o: float, peak_d: float | None) -> dict:
     """From a card's sweep records: the scripted grasp's peak D at closure 1.0 over tau_o (median of
-    its repeats), and the percentage of the stable grasps (every closure from the loosest that
-    always holds) whose peak D is at most ``peak_d``: the calibration percentile whose tau_o a
-    binary close of peak D ``peak_d`` would stay within."""
-    groups = by_closure(records)
-    full = [r["peak_deformation"] for r in groups.get(1.0, [])]
-    holding = [g for g, rs in groups.items() if all(r["held"] for r in rs)]
-    stable = np.array([r["peak_deformation"] for g, rs in groups.items() if holding and g >= holding[0]
-                       for r in rs if r["held"]], float)
-    return {"sweep_r_at_closure_1": float(np.median(full)) / tau_o if full else None,
-            "covering_percentile": (float(100.0 * np.mean(stable <= peak_d)) if stable.size and peak_d is not None
-                                    else None)}
+    its repeats), and the lowest percentile (0.01 steps) of the stable grasps' peak D that reaches
+    ``peak_d``: the calibration percentile whose tau_o a binary close of peak D ``peak_d`` would stay
+    within (None: beyond every stable grasp of the sweep)."""
+    full = [r["peak_deformation"] for r in by_closure(records).get(1.0, [])]
+    _, stable = stable_grasps(records)
+    peaks = np.array([r["peak_deformation"] for r in stable], float)
+    covering = None
+    if peak_d is not None:
+        levels = np.linspace(0.0, 100.0, 10001)
+        reached = np.nonzero(np.percentile(peaks, levels) >= peak_d)[0]
+        covering = float(levels[reached[0]]) if reached.size else None
+    return {"sweep_r_at_closure_1": float(np.median(full)) / tau_o if full else None, "covering_percentile": covering}
 
 
 def analyse(binary: DemoSet, continuous: DemoSet) -> dict:
     manifest = read_json(binary.manifest) if binary.manifest.is_file() else {}
-    if not manifest.get("control_mode", "").endswith("_binary"):
+    if not (manifest.get("control_mode") or "").endswith("_binary"):
         raise ValueError(f"{binary.manifest}: not a binary-gripper generation (control mode "
                          f"{manifest.get('control_mode')!r}); run this study with --seeds N to generate one")
     rows = {}
@@ -90,8 +96,9 @@ def analyse(binary: DemoSet, continuous: DemoSet) -> dict:
     succ = sum(r["successes"] for r in rows.values())
     dsr = sum(r["dsr_successes"] for r in rows.values())
     never = [f"task {t} ({r['asset']})" for t, r in rows.items() if r["successes"] and not r["dsr_successes"]]
-    summary = (f"of {n} episodes, {succ} succeed and {dsr} within tolerance (TSR {100 * succ / n:.0f} %, DSR "
-               f"{100 * dsr / n:.0f} %); no seed within tolerance on {', '.join(never) if never else 'no task'}.")
+    summary = (f"of {n} episodes, {succ} succeed and {dsr} of them within tolerance (TSR {100 * succ / n:.0f} %, DSR "
+               f"{100 * dsr / n:.0f} %); tasks carried on some seed but within tolerance on none: "
+               f"{', '.join(never) if never else 'none'}.")
     return {"suite": binary.suite, "control_mode": manifest["control_mode"], "tasks": rows, "episodes": n,
             "successes": succ, "dsr_successes": dsr, "summary": summary}
 
@@ -109,9 +116,10 @@ def build(result: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|"]
     for t, r in result["tasks"].items():
         rng = f" [{r['r_max_range'][0]:.2f}, {r['r_max_range'][1]:.2f}]" if r["r_max_range"] else ""
+        covering = "beyond the sweep" if r["covering_percentile"] is None else f"{r['covering_percentile']:.1f}"
         lines.append(f"| {t} ({r['asset']}) | {r['episodes']} | {r['successes']} | {r['within_tolerance']} | "
                      f"{r['dsr_successes']} | {fmt(r['r_max_median'])}{rng} | {fmt(r['continuous_r_max_median'])} | "
-                     f"{fmt(r['sweep_r_at_closure_1'])} | {fmt(r['covering_percentile'], '.0f')} |")
+                     f"{fmt(r['sweep_r_at_closure_1'])} | {covering} |")
     lines += ["", f"In all: {result['summary']} tau_o is the 90th percentile of peak D over the calibration sweep's "
               "stable grasps (closures up to 1.0), so the sweep's own tightest grasps lie beyond it by construction "
               "(docs/calibration.md)."]
@@ -122,7 +130,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.binary_close", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--demos", type=Path, required=True, help="where the binary-gripper episodes go (a store of their own)")
-    ap.add_argument("--suite", default="object_soft")
+    ap.add_argument("--suite", default="object_soft", choices=sorted(s for s, suite in SUITES.items() if not suite.rigid),
+                    help="a soft suite (the rigid twins have no tolerance to leave)")
     ap.add_argument("--seeds", type=int, default=None, metavar="N",
                     help="generate (or resume) the first N training seeds of every task first")
     ap.add_argument("--workers", type=int, default=1)

@@ -257,7 +257,7 @@ def load_runs(paths: list[Path], twins: Path | None = None, twins_required: bool
         shas = {single_run(ood, path), single_run(id_records, id_path)}
         if len(shas) > 1:
             raise ValueError(f"{path} and {id_path} were made with different policy files (their policy_sha256 differ)")
-        variant = variant_of(ood[0])
+        variant = variant_of(next((r for r in ood if r["receipt"].get("policy")), ood[0]))  # a worker_died record names none
         if variant in runs:
             raise ValueError(f"two files of variant {variant}: {path} and another; report one run of each")
         runs[variant] = (ood, id_records)

@@ -67,13 +67,15 @@ def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
         label = variant_of(r) if r["receipt"].get("policy") else named.get(r["policy"], variant_of(r))
         return f"{label} ({policy_tag(r['policy'])})" if str(r["policy"]).endswith(".pt") else label
 
-    hashes: dict[str, set] = {}
+    # Files of one name on different suites (a variant and its rigid-twin training) are rows of
+    # their own suite already: only files of one name on one suite need the hash to tell them apart.
+    hashes: dict[tuple[str, str], set] = {}
     for r in records:  # a record from before the hash was kept is of whichever file it names
-        hashes.setdefault(base(r), set()).update({r["policy_sha256"]} if r.get("policy_sha256") else set())
+        hashes.setdefault((r["suite"], base(r)), set()).update({r["policy_sha256"]} if r.get("policy_sha256") else set())
     out = []
     for r in records:
         label = base(r)
-        if len(hashes[label]) > 1 and r.get("policy_sha256"):
+        if len(hashes[(r["suite"], label)]) > 1 and r.get("policy_sha256"):
             label += f" sha {r['policy_sha256'][:8]}"
         out.append(label + (LEGACY_MARK if legacy else ""))
     return out
