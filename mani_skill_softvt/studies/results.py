@@ -13,7 +13,8 @@ blown-up FEM: harm that TSR - DSR cannot show when a policy never succeeds) and 
 collapsed, and the paper's
 numbers for the same configuration. Then TSR / DSR per task side by side, and every two of
 today's variants compared on the episodes both ran (the protocol's seeds are the same for every
-policy, so the comparison is paired: exact McNemar p-values), and each variant on a soft suite
+policy, so the comparison is paired: exact McNemar p-values and Newcombe's paired 95 % interval of the
+difference), and each variant on a soft suite
 against the same variant trained on its rigid twin suite, paired on the seeds both draw (the
 paper's rigid-twin comparison). ``<out>/success_traces.png`` draws
 the R_t traces of each variant's successes, within and beyond the tolerance (the paper's
@@ -147,13 +148,14 @@ def variant_name(label: str) -> str:
 
 
 def comparison_lines(pairs: dict[str, dict]) -> list[str]:
-    lines = ["| comparison (A vs B) | outcome | pairs | both | only A | only B | neither | A - B (points) | McNemar p |",
+    lines = ["| comparison (A vs B) | outcome | pairs | both | only A | only B | neither | A - B (points) [95% CI] | McNemar p |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, pair in pairs.items():
         for outcome, label in (("success", "task success"), ("dsr_success", "deformation-aware success")):
             c = pair[outcome]
+            lo, hi = c["difference_ci95"]
             lines.append(f"| {name} | {label} | {c['pairs']} | {c['both']} | {c['only_a']} | {c['only_b']} | "
-                         f"{c['neither']} | {100 * c['difference']:+.1f} | {c['p_value']:.2g} |")
+                         f"{c['neither']} | {100 * c['difference']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] | {c['p_value']:.2g} |")
     return lines
 
 
