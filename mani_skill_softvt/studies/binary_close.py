@@ -1,6 +1,7 @@
 """What a binary close does to each object against its tolerance (the findings campaign's step 4).
 
     python -m mani_skill_softvt.studies.binary_close --demos /root/binary-close --seeds 10
+    python -m mani_skill_softvt.studies.binary_close --demos baselines/results/binary_close   # the committed run's logs
 
 A binary gripper action has two values: open, or close until the fingers stall against the 10 N
 force limit (``pd_ee_pose_binary``, as the release's binary action). The scripted expert runs

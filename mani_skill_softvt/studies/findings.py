@@ -8,7 +8,7 @@ OOD records of VO-C and VT-C (``object_soft_ood_vo-c-cpu.jsonl``, ``..._vt-c-cpu
 their ID twins (``twins/``), and ``binary_close.json`` (:mod:`.binary_close`) where it exists.
 Writes ``findings.md`` and ``.json`` beside them: for each finding the paper's numbers beside
 ours, the paired exact tests on shared seeds, and a verdict per claim by the rules below, fixed
-before the records were in. The findings page of the docs (step 5 of the campaign) reads these.
+before the records were in. docs/findings.md reads these and says why ours may differ.
 
 The rules.
 
