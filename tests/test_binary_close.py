@@ -29,6 +29,7 @@ def test_a_binary_close_is_scored_by_the_screening_and_set_beside_the_continuous
     assert (row["episodes"], row["successes"], row["within_tolerance"], row["dsr_successes"]) == (6, 3, 3, 1)
     assert row["r_max_range"] == (0.0, 1.03)  # the NaN left out
     assert row["continuous_r_max_median"] == pytest.approx(0.45) and row["continuous_episodes"] == 6  # seeds 0-5 only
+    assert (row["continuous_successes"], row["continuous_dsr_successes"]) == (6, 6)
     assert (tmp_path / "binary_close.md").read_text().count("| 0 (") == 1
 
 

@@ -53,12 +53,15 @@ def task_row(binary: list[dict], continuous: list[dict]) -> dict:
     outs = [screened(v) for v in binary]
     r = np.array([o["r_max"] for o in outs if o["r_max"] is not None], float)
     seeds = {v["seed"] for v in binary}
-    cont = np.array([v["r_max"] for v in continuous if v["seed"] in seeds and v.get("r_max") is not None], float)
+    same = [screened(v) for v in continuous if v["seed"] in seeds]  # every screened seed, rejected ones too
+    cont = np.array([o["r_max"] for o in same if o["r_max"] is not None], float)
     return {"episodes": len(outs), "successes": sum(o["success"] for o in outs),
             "within_tolerance": sum(o["within"] for o in outs), "dsr_successes": sum(o["dsr_success"] for o in outs),
             "r_max_median": float(np.median(r)) if r.size else None,
             "r_max_range": (float(r.min()), float(r.max())) if r.size else None,
-            "continuous_r_max_median": float(np.median(cont)) if cont.size else None, "continuous_episodes": int(cont.size)}
+            "continuous_episodes": len(same), "continuous_successes": sum(o["success"] for o in same),
+            "continuous_dsr_successes": sum(o["dsr_success"] for o in same),
+            "continuous_r_max_median": float(np.median(cont)) if cont.size else None}
 
 
 def sweep_at_full_close(records: list[dict], tau_o: float, peak_d: float | None) -> dict:
@@ -96,10 +99,14 @@ def analyse(binary: DemoSet, continuous: DemoSet) -> dict:
     n = sum(r["episodes"] for r in rows.values())
     succ = sum(r["successes"] for r in rows.values())
     dsr = sum(r["dsr_successes"] for r in rows.values())
+    cn = sum(r["continuous_episodes"] for r in rows.values())
+    cs = sum(r["continuous_successes"] for r in rows.values())
+    cd = sum(r["continuous_dsr_successes"] for r in rows.values())
     never = [f"task {t} ({r['asset']})" for t, r in rows.items() if r["successes"] and not r["dsr_successes"]]
     summary = (f"of {n} episodes, {succ} succeed and {dsr} of them within tolerance (TSR {100 * succ / n:.0f} %, DSR "
                f"{100 * dsr / n:.0f} %); tasks carried on some seed but within tolerance on none: "
-               f"{', '.join(never) if never else 'none'}.")
+               f"{', '.join(never) if never else 'none'}. The continuous expert on the same seeds: "
+               f"{cs} of {cn} succeed, {cd} within tolerance.")
     return {"suite": binary.suite, "control_mode": manifest["control_mode"], "tasks": rows, "episodes": n,
             "successes": succ, "dsr_successes": dsr, "summary": summary}
 
@@ -113,13 +120,14 @@ def build(result: dict) -> str:
              "they stall against the 10 N force limit. R_max = D_max / tau_o over the episode; the continuous "
              "expert (its calibrated closure) on the same seeds beside it.", "",
              "| task (object) | episodes | task successes | within tolerance | both (DSR) | R_max median [min, max] "
-             "| continuous expert R_max median | sweep grasp at closure 1.0, R | calibration percentile covering it |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| continuous expert: successes / DSR, R_max median | sweep grasp at closure 1.0, R "
+             "| calibration percentile covering it |", "|---|---|---|---|---|---|---|---|---|"]
     for t, r in result["tasks"].items():
         rng = f" [{r['r_max_range'][0]:.2f}, {r['r_max_range'][1]:.2f}]" if r["r_max_range"] else ""
         covering = "beyond the sweep" if r["covering_percentile"] is None else f"{r['covering_percentile']:.1f}"
         lines.append(f"| {t} ({r['asset']}) | {r['episodes']} | {r['successes']} | {r['within_tolerance']} | "
-                     f"{r['dsr_successes']} | {fmt(r['r_max_median'])}{rng} | {fmt(r['continuous_r_max_median'])} | "
+                     f"{r['dsr_successes']} | {fmt(r['r_max_median'])}{rng} | {r['continuous_successes']} / "
+                     f"{r['continuous_dsr_successes']} of {r['continuous_episodes']}, {fmt(r['continuous_r_max_median'])} | "
                      f"{fmt(r['sweep_r_at_closure_1'])} | {covering} |")
     lines += ["", f"In all: {result['summary']} tau_o is the 90th percentile of peak D over the calibration sweep's "
               "stable grasps (closures up to 1.0), so the sweep's own tightest grasps lie beyond it by construction "
