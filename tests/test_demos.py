@@ -186,6 +186,7 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
         assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)
 
 
+@pytest.mark.slow  # two renderings of the demo; the native size is checked by default
 def test_render_at_a_camera_size_shows_the_same_views_with_fewer_pixels(dataset, tmp_path):
     """``render --camera-size`` renders both cameras at that size (ManiSkill's sensor_configs, kept
     in the json for its tools): the same views as the native 224x224 rendering shrunk to that

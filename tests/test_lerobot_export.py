@@ -190,6 +190,7 @@ def test_videos_decode_with_the_right_frames(exported):
             assert err < 6.0, (vk, i, err)
 
 
+@pytest.mark.slow  # four more videos encoded; the API export of the same episode is checked by default
 def test_cli_export_gives_every_image_stream_one_shape(rendered, tmp_path):
     # LeRobot's stock DiffusionPolicy refuses image inputs of different shapes (cameras 224x224,
     # GelSight 240x320); the CLI's default resizes every stream to the cameras' size.

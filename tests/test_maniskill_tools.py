@@ -128,6 +128,7 @@ def test_replay_from_the_first_state_reproduces_the_episode(mp_demo, tmp_path):
         assert b["traj_0/success"][-1]
 
 
+@pytest.mark.slow  # a rendered replay; ManiSkill's own replay of the same demo runs by default
 def test_delta_mode_replay_loads_like_maniskills_diffusion_policy_data(mp_demo, tmp_path):
     src = _copy(mp_demo, tmp_path)
     _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", "pd_ee_delta_pose", "-o", "rgb", "--save-traj")

@@ -130,7 +130,13 @@ def test_same_seed_same_initial_state_and_different_seed_differs(object_env):
     assert not torch.allclose(a, c)
 
 
-@pytest.mark.parametrize("condition", sorted(OOD_CONDITIONS))
+# One condition per factor (light, mass, stiffness) by default, each through its own code path; the
+# other six differ only in the value, so they run with ``-m slow`` (CI runs them).
+_ONE_PER_FACTOR = {"light_180", "mass_x2.5", "youngs_modulus_x0.5"}
+
+
+@pytest.mark.parametrize("condition", [c if c in _ONE_PER_FACTOR else pytest.param(c, marks=pytest.mark.slow)
+                                       for c in sorted(OOD_CONDITIONS)])
 def test_ood_options_change_exactly_their_factor(object_env, condition):
     env, u = object_env, object_env.unwrapped
     env.reset(seed=7)
@@ -258,6 +264,7 @@ def obs_before(env, side):
     return torch.from_numpy(env.unwrapped.tactile_background(side)[None])
 
 
+@pytest.mark.slow  # three rendered soft episodes; the evaluator's camera sizes are checked by default
 def test_cameras_render_only_for_the_observations_a_policy_reads():
     """rollout(skip_unread_cameras=True), as the evaluator runs it: a chunk's inner steps and the
     steps whose images the policy declines render no camera, and the episode is the same bit for
@@ -376,8 +383,6 @@ def test_an_episode_is_the_same_bits_in_a_fresh_env_and_after_other_episodes():
     first at step 32, when a finger presses the basket (a Diffusion Policy's soft-cube episode
     parted so at step 153, a finger's impulse on the basket 0.3766 against 0.3753 N s). Every
     reset therefore rebuilds the scene."""
-    import warnings
-
     envs = []
 
     def make(**kw):
@@ -391,10 +396,22 @@ def test_an_episode_is_the_same_bits_in_a_fresh_env_and_after_other_episodes():
         _press_into_the_basket(env, seed=8, offset=(0.05, 0.0), options={"ood": "mass_x2.5"})
         assert _first_difference(_press_into_the_basket(env, seed=7), fresh) is None
         assert _first_difference(_press_into_the_basket(env, seed=7), fresh) is None
+    finally:
+        for e in envs:
+            e.close()
+
+
+@pytest.mark.slow  # a diagnostic of the reason above, not a guarantee: three more soft episodes
+def test_without_the_per_reset_rebuild_physx_history_shows_here_or_a_warning_says_not():
+    import warnings
+
+    envs = [gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="state_dict"),
+            gym.make("SoftVTObjectSoft-v1", task_id=3, obs_mode="state_dict", reconfiguration_freq=0)]
+    try:
+        fresh = _press_into_the_basket(envs[0], seed=7)
         # Whether the plain reset shows the dependence here depends on how the machine rounds.
-        plain = make(reconfiguration_freq=0)
-        _press_into_the_basket(plain, seed=7)
-        if _first_difference(_press_into_the_basket(plain, seed=7), fresh) is None:
+        _press_into_the_basket(envs[1], seed=7)
+        if _first_difference(_press_into_the_basket(envs[1], seed=7), fresh) is None:
             warnings.warn("without the per-reset rebuild this scenario reproduced on this machine: the test "
                           "shows no PhysX history here", stacklevel=1)
     finally:

@@ -92,6 +92,7 @@ def test_names_and_record_comparison():
     assert any("trace" in d for d in diffs) and any("r_max" in d for d in diffs)
 
 
+@pytest.mark.slow  # a rendered episode and its mp4; the frame layout is checked by default
 def test_short_episode_video_is_the_stored_episode(tmp_path):
     """A capped `hold` episode, evaluated in state_dict mode, re-run into an mp4: same trace, right frames."""
     import gymnasium as gym
