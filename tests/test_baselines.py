@@ -797,6 +797,70 @@ def test_closure_summary_tells_one_held_closure_from_a_ratchet():
         held_chunks([0.5] * 8, [True] * 7, k)
 
 
+def test_closure_summary_names_the_closure_that_let_the_object_go():
+    from mani_skill_softvt.studies.closure import closure_summary
+
+    k = 8
+    # Held over three chunks at 0.6, 0.8 and 0.6 (a policy switching between demos' closures), then
+    # a chunk at 0.45 that opens the fingers: the spread is that of the held chunks, let_go the first
+    # closure after the last held step.
+    closure = [0.0] * 8 + [0.6] * 8 + [0.8] * 8 + [0.6] * 8 + [0.45] * 8
+    held = [False] * 8 + [True] * 24 + [False] * 8
+    s = closure_summary(closure, held, k)
+    assert s["spread"] == pytest.approx(np.std([0.6, 0.8, 0.6])) and s["let_go"] == 0.45
+    # The pads: 6 N through the hold, 0 once the 0.45 chunk opens the fingers (not a slip under load).
+    grip = [0.0] * 8 + [6.0] * 24 + [0.0] * 8
+    s = closure_summary(closure, held, k, grip)
+    assert (s["grip_held"], s["grip_let_go"]) == (6.0, 0.0)
+    with pytest.raises(ValueError, match="differ in length"):
+        closure_summary(closure, held, k, grip[:-1])
+    assert closure_summary([0.6] * 16, [True] * 16, k)["let_go"] is None  # held to the end
+    assert closure_summary([0.6] * 16, [True] * 16, k)["spread"] == 0.0  # one closure, as the expert
+
+
+def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
+    from mani_skill_softvt.studies.closure import closure_readout
+
+    c = np.linspace(0.3, 0.9, 20)
+    # Soft: the fingers go 18 mm further in over the closure range (the demos' Object-Soft figure).
+    soft = closure_readout(c, 0.060 - 0.030 * (c - 0.3))
+    assert soft["corr"] == pytest.approx(-1.0) and soft["slope_mm"] == pytest.approx(-30.0)
+    assert soft["width_range_mm"] == pytest.approx([42.0, 60.0])
+    # Rigid: the jaw stops at the object's width whatever the closure, up to PhysX's 0.1 mm jitter.
+    jitter = np.random.default_rng(0).normal(0, 1e-4, c.size)
+    rigid = closure_readout(c, 0.060 + jitter)
+    assert abs(rigid["slope_mm"]) < 0.5 and np.ptp(rigid["width_range_mm"]) < 1.0
+    assert closure_readout(c, np.full(c.size, 0.06))["corr"] == 0.0  # a width that never moves reads nothing
+    with pytest.raises(ValueError, match="same closure"):
+        closure_readout(np.full(5, 0.5), np.linspace(0.05, 0.06, 5))
+    with pytest.raises(ValueError, match="at least 3"):
+        closure_readout([0.3, 0.9], [0.06, 0.05])
+
+
+def test_demo_closures_reads_each_demos_held_closure_and_width(tmp_path):
+    from mani_skill_softvt.studies.closure import demo_closures
+
+    ds = DemoSet(tmp_path, "object_rigid")
+    ds.dir.mkdir(parents=True)
+    with h5py.File(ds.trajectory(2), "w") as ft:
+        for e, (closure, width) in enumerate([(0.5, 0.034), (0.7, 0.0341), (0.9, 0.0339)]):
+            a = np.zeros((6, 7), np.float32)
+            a[2:5, 6] = closure  # closes at step 2, releases at step 5
+            ft[f"traj_{e}/actions"] = a
+            ft[f"traj_{e}/evaluator/is_grasped"] = np.array([0, 0, 1, 1, 1, 0], bool)
+            state = np.zeros((7, 13 + 9 + 9), np.float32)  # root pose, velocity, qpos (9), qvel (9)
+            state[:, 20:22] = 0.04
+            state[3:6, 20:22] = width / 2  # the state after each held step: row t + 1
+            ft[f"traj_{e}/env_states/articulations/panda_softvt"] = state
+        ft["traj_3/actions"] = np.zeros((3, 7), np.float32)  # never held: not a demo of a closure
+        ft["traj_3/evaluator/is_grasped"] = np.zeros(3, bool)
+    closures, widths = demo_closures(ds, 2)
+    assert closures.tolist() == pytest.approx([0.5, 0.7, 0.9])
+    assert widths.tolist() == pytest.approx([0.034, 0.0341, 0.0339])
+    with pytest.raises(FileNotFoundError, match="generate"):
+        demo_closures(ds, 3)
+
+
 @pytest.mark.parametrize("args, message", [
     (["nowhere.pt"], "not a policy file"),
     (["{policy}", "--task", "10"], "--task must be in"),
