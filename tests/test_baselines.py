@@ -818,6 +818,23 @@ def test_closure_summary_names_the_closure_that_let_the_object_go():
     assert closure_summary([0.6] * 16, [True] * 16, k)["spread"] == 0.0  # one closure, as the expert
 
 
+def test_closure_study_fails_on_other_bits_only_on_the_stack_that_made_the_records():
+    from mani_skill_softvt.studies.closure import record_check
+
+    here = {"cpu": "Intel Xeon", "torch": "2.11.0"}
+    same = {1: [], 2: []}
+    assert record_check(same, [here, here], here)["records_failed"] is False
+    bits = {1: ["r_max", "steps"], 2: []}
+    c = record_check(bits, [here, here], here)
+    assert c["records_failed"] and c["records_stack_differences"] == [] and c["records_outcome_differing"] == []
+    # Another machine: the same episode keeps its outcome, not its bits. Only the outcome is checked.
+    epyc = {"cpu": "AMD EPYC", "torch": "2.11.0"}
+    c = record_check({1: ["r_max"], 2: ["termination", "success"]}, [epyc, epyc], here)
+    assert not c["records_failed"] and c["records_stack_differences"] == ["cpu AMD EPYC -> Intel Xeon"]
+    assert c["records_outcome_differing"] == [2]
+    assert record_check(bits, [None, None], here)["records_stack_differences"] == "unrecorded"
+
+
 def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
     from mani_skill_softvt.studies.closure import closure_readout
 
