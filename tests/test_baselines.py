@@ -802,47 +802,51 @@ def test_closure_summary_names_the_closure_that_let_the_object_go():
 
     k = 8
     # Held over three chunks at 0.6, 0.8 and 0.6 (a policy switching between demos' closures), then
-    # a chunk at 0.45 that opens the fingers: the spread is that of the held chunks, let_go the first
-    # closure after the last held step.
-    closure = [0.0] * 8 + [0.6] * 8 + [0.8] * 8 + [0.6] * 8 + [0.45] * 8
+    # a chunk that opens the fingers (0.45, then lower): the spread is that of the held chunks,
+    # let_go the first closure after the last held step, not a later one.
+    closure = [0.0] * 8 + [0.6] * 8 + [0.8] * 8 + [0.6] * 8 + [0.45, 0.3, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0]
     held = [False] * 8 + [True] * 24 + [False] * 8
     s = closure_summary(closure, held, k)
     assert s["spread"] == pytest.approx(np.std([0.6, 0.8, 0.6])) and s["let_go"] == 0.45
-    # The pads: 6 N through the hold, 0 once the 0.45 chunk opens the fingers (not a slip under load).
-    grip = [0.0] * 8 + [6.0] * 24 + [0.0] * 8
+    # The pads: 6 N through the hold (5.5 N at its last step), 0 once the fingers open (no slip under load).
+    grip = [0.0] * 8 + [6.0] * 23 + [5.5] + [0.0, 1.0, 2.0] + [0.0] * 5
     s = closure_summary(closure, held, k, grip)
-    assert (s["grip_held"], s["grip_let_go"]) == (6.0, 0.0)
+    assert (s["grip_held"], s["grip_let_go"]) == (5.5, 0.0)
     with pytest.raises(ValueError, match="differ in length"):
         closure_summary(closure, held, k, grip[:-1])
-    assert closure_summary([0.6] * 16, [True] * 16, k)["let_go"] is None  # held to the end
-    assert closure_summary([0.6] * 16, [True] * 16, k)["spread"] == 0.0  # one closure, as the expert
+    # Held to the end: nothing let go. One closure over several chunks, as the expert: no spread.
+    s = closure_summary([0.6] * 16, [True] * 16, k, [4.0] * 16)
+    assert s["let_go"] is None and s["grip_let_go"] is None and s["grip_held"] == 4.0 and s["spread"] == 0.0
+    assert closure_summary([0.6] * 8, [True] * 8, k)["spread"] is None  # one held chunk shows no switching
+    never = closure_summary([0.0] * 16, [False] * 16, k, [0.0] * 16)
+    assert never["let_go"] is None and never["grip_held"] is None and never["spread"] is None
 
 
-def test_closure_study_fails_on_other_bits_only_on_the_stack_that_made_the_records():
+def test_closure_study_judges_records_as_evaluate_reproduce_and_names_the_stack():
     from mani_skill_softvt.studies.closure import record_check
 
     here = {"cpu": "Intel Xeon", "torch": "2.11.0"}
-    same = {1: [], 2: []}
-    assert record_check(same, [here, here], here)["records_failed"] is False
-    bits = {1: ["r_max", "steps"], 2: []}
-    c = record_check(bits, [here, here], here)
+    assert record_check({1: [], 2: []}, [here, here], here)["records_failed"] is False
+    c = record_check({1: ["r_max", "steps"], 2: []}, [here, here], here)
     assert c["records_failed"] and c["records_stack_differences"] == [] and c["records_outcome_differing"] == []
-    # Another machine: the same episode keeps its outcome, not its bits. Only the outcome is checked.
+    # Another machine: the same episode keeps its outcome, not its bits. The bits still fail the
+    # check (as evaluate --reproduce); the stack says why, and the outcomes are compared.
     epyc = {"cpu": "AMD EPYC", "torch": "2.11.0"}
-    c = record_check({1: ["r_max"], 2: ["termination", "success"]}, [epyc, epyc], here)
-    assert not c["records_failed"] and c["records_stack_differences"] == ["cpu AMD EPYC -> Intel Xeon"]
+    c = record_check({1: ["r_max"], 2: ["termination", "success"]}, [epyc, here], here)
+    assert c["records_failed"] and c["records_stack_differences"] == ["cpu AMD EPYC -> Intel Xeon"]
     assert c["records_outcome_differing"] == [2]
-    assert record_check(bits, [None, None], here)["records_stack_differences"] == "unrecorded"
+    c = record_check({1: ["r_max"]}, [None], here)
+    assert c["records_failed"] and c["records_stack_differences"] == "unrecorded"
 
 
 def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
     from mani_skill_softvt.studies.closure import closure_readout
 
     c = np.linspace(0.3, 0.9, 20)
-    # Soft: the fingers go 18 mm further in over the closure range (the demos' Object-Soft figure).
-    soft = closure_readout(c, 0.060 - 0.030 * (c - 0.3))
+    # Soft: the fingers go 18 mm further in over the closure range, and the pads press harder.
+    soft = closure_readout(c, 0.060 - 0.030 * (c - 0.3), 10.0 * c)
     assert soft["corr"] == pytest.approx(-1.0) and soft["slope_mm"] == pytest.approx(-30.0)
-    assert soft["width_range_mm"] == pytest.approx([42.0, 60.0])
+    assert soft["width_range_mm"] == pytest.approx([42.0, 60.0]) and soft["grip_corr"] == pytest.approx(1.0)
     # Rigid: the jaw stops at the object's width whatever the closure, up to PhysX's 0.1 mm jitter.
     jitter = np.random.default_rng(0).normal(0, 1e-4, c.size)
     rigid = closure_readout(c, 0.060 + jitter)
@@ -852,6 +856,8 @@ def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
         closure_readout(np.full(5, 0.5), np.linspace(0.05, 0.06, 5))
     with pytest.raises(ValueError, match="at least 3"):
         closure_readout([0.3, 0.9], [0.06, 0.05])
+    with pytest.raises(ValueError, match="one held force per demo"):
+        closure_readout(c, 0.060 + jitter, [1.0, 2.0])
 
 
 def test_demo_closures_reads_each_demos_held_closure_and_width(tmp_path):
@@ -861,21 +867,26 @@ def test_demo_closures_reads_each_demos_held_closure_and_width(tmp_path):
     ds.dir.mkdir(parents=True)
     with h5py.File(ds.trajectory(2), "w") as ft:
         for e, (closure, width) in enumerate([(0.5, 0.034), (0.7, 0.0341), (0.9, 0.0339)]):
-            a = np.zeros((6, 7), np.float32)
-            a[2:5, 6] = closure  # closes at step 2, releases at step 5
-            ft[f"traj_{e}/actions"] = a
-            ft[f"traj_{e}/evaluator/is_grasped"] = np.array([0, 0, 1, 1, 1, 0], bool)
+            g = ft.create_group(f"traj_{e}")
+            g.attrs["closure"] = closure  # the expert's draw
+            g["evaluator/is_grasped"] = np.array([0, 0, 1, 1, 0, 0], bool)  # held after steps 2 and 3
+            # Row t + 1 is the state after step t: the held rows are 3 and 4. Every other row differs,
+            # so reading the rows one off (or the reset's) gives another median.
             state = np.zeros((7, 13 + 9 + 9), np.float32)  # root pose, velocity, qpos (9), qvel (9)
-            state[:, 20:22] = 0.04
-            state[3:6, 20:22] = width / 2  # the state after each held step: row t + 1
-            ft[f"traj_{e}/env_states/articulations/panda_softvt"] = state
-        ft["traj_3/actions"] = np.zeros((3, 7), np.float32)  # never held: not a demo of a closure
-        ft["traj_3/evaluator/is_grasped"] = np.zeros(3, bool)
-    closures, widths = demo_closures(ds, 2)
+            state[:, 20:22] = (np.array([0.08, 0.07, 0.05, width, width + 2e-4, 0.06, 0.08]) / 2)[:, None]
+            g["env_states/articulations/panda_softvt"] = state
+            g["evaluator/pad_force"] = np.array([[0, 0], [0, 9], [5, 4], [3, 2 + e], [8, 7], [0, 0]], np.float32)
+        ft["traj_3/evaluator/is_grasped"] = np.zeros(3, bool)  # never held: not a demo of a closure
+    closures, widths, grips = demo_closures(ds, 2)
     assert closures.tolist() == pytest.approx([0.5, 0.7, 0.9])
-    assert widths.tolist() == pytest.approx([0.034, 0.0341, 0.0339])
+    assert widths.tolist() == pytest.approx([0.0341, 0.0342, 0.0340])  # the median of the two held rows
+    assert grips.tolist() == pytest.approx([3.0, 3.5, 3.5])  # the weaker pad over steps 2 and 3
     with pytest.raises(FileNotFoundError, match="generate"):
         demo_closures(ds, 3)
+    with h5py.File(ds.trajectory(2), "a") as ft:
+        del ft["traj_0"].attrs["closure"]
+    with pytest.raises(ValueError, match="no 'closure' attribute"):
+        demo_closures(ds, 2)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -13,8 +13,9 @@ evaluator's own episode (:func:`~mani_skill_softvt.evaluation.runner.run_episode
 every step's commanded closure (the action's gripper column), whether the object was held, and
 the force on the weaker pad.
 Each episode's record is checked against the policy's committed ID records in ``--records``
-(``evaluate``'s files), which it must match bit for bit (exit status 1 if not) when they were made
-on this stack; records made on another (or before records named theirs) are compared by outcome.
+(``evaluate``'s files), which it must match bit for bit (exit status 1 if not, as ``evaluate
+--reproduce``); for records made on another stack it also says what differs and whether the
+outcomes held.
 
 It writes ``closure_<suite>_task<T>.json`` (the closures, R_t, the summaries below, each policy's
 SHA-256) and ``closure_<suite>_task<T>.png`` (closure and R_t over time, one column per policy; the
@@ -40,8 +41,8 @@ from tqdm import tqdm
 
 from ..baselines.agent import GRIPPER
 from ..data.demo_set import DemoSet
-from ..data.trajectory import open_h5
 from ..data.seeds import ID_EPISODES_PER_TASK
+from ..data.trajectory import open_h5
 from ..evaluation.protocols import episode_key
 from ..evaluation.report import rt_series
 from ..evaluation.run import RunConfig, policy_tag
@@ -74,12 +75,14 @@ def held_chunks(closure, held, chunk: int) -> np.ndarray:
 def closure_summary(closure, held, chunk: int, grip=None) -> dict:
     """The commanded closure while the object was held: the first and last held chunk, the rise
     between them (0 for a policy that holds one closure, as the expert does), the spread (standard
-    deviation) of the held chunks' medians (0 likewise), the largest closure of any held step, and
+    deviation) of the held chunks' medians (0 likewise; None for a single held chunk, which shows
+    no switching either way), the largest closure of any held step, and
     ``let_go``: the closure commanded at the first step after the last held one (None if the object
     was held to the end), the release of a success or the opening that drops the object. With
     ``grip`` (each step's force on the weaker pad, N): ``grip_held`` at the last held step and
     ``grip_let_go`` at the let-go step (0 there: the fingers opened off the object; not 0: it
-    slipped out under load)."""
+    slipped out under load). The last held step may already be the first of the chunk that lets go,
+    so ``grip_held`` can show that chunk's transient rather than the hold's force."""
     medians = held_chunks(closure, held, chunk)
     closure, held = np.asarray(closure, np.float64), np.asarray(held, bool)
     last_held = len(held) - 1 - int(np.argmax(held[::-1])) if held.any() else None
@@ -94,47 +97,66 @@ def closure_summary(closure, held, chunk: int, grip=None) -> dict:
     if len(medians) == 0:
         return {"held_chunks": 0, "first": None, "last": None, "rise": None, "spread": None, "max": None, **out}
     return {"held_chunks": int(len(medians)), "first": float(medians[0]), "last": float(medians[-1]),
-            "rise": float(medians[-1] - medians[0]), "spread": float(medians.std()),
+            "rise": float(medians[-1] - medians[0]), "spread": float(medians.std()) if len(medians) > 1 else None,
             "max": float(closure[held].max()), **out}
 
 
-def closure_readout(closures, held_widths) -> dict:
+def closure_readout(closures, held_widths, held_grips=None) -> dict:
     """How well the held jaw width tells the closure, across demos (one closure and one median held
     width each): their Pearson correlation, the least-squares slope (mm of width per unit of
     closure) and the range of held widths (mm). A width that does not move with the closure
-    (rigid twin) leaves a policy's state blind to how hard it squeezes."""
+    (rigid twin) leaves a policy's state blind to how hard it squeezes. With ``held_grips`` (the
+    weaker pad's median held force, N), ``grip_corr``: how well the force, which touch sees,
+    tells it."""
     c, w = np.asarray(closures, np.float64), np.asarray(held_widths, np.float64) * 1e3
     if c.shape != w.shape or len(c) < 3:
         raise ValueError(f"need one closure and one held width per demo, at least 3; got {c.shape} and {w.shape}")
     if np.ptp(c) == 0:
         raise ValueError("every demo has the same closure: nothing to read out")
-    corr = float(np.corrcoef(c, w)[0, 1]) if np.ptp(w) > 0 else 0.0
-    return {"demos": int(len(c)), "corr": corr, "slope_mm": float(np.polyfit(c, w, 1)[0]),
-            "width_range_mm": [float(w.min()), float(w.max())], "closure_range": [float(c.min()), float(c.max())]}
+    out = {"demos": int(len(c)), "corr": float(np.corrcoef(c, w)[0, 1]) if np.ptp(w) > 0 else 0.0,
+           "slope_mm": float(np.polyfit(c, w, 1)[0]), "width_range_mm": [float(w.min()), float(w.max())],
+           "closure_range": [float(c.min()), float(c.max())]}
+    if held_grips is not None:
+        g = np.asarray(held_grips, np.float64)
+        if g.shape != c.shape:
+            raise ValueError(f"need one held force per demo: {g.shape} for {c.shape} closures")
+        out["grip_corr"] = float(np.corrcoef(c, g)[0, 1]) if np.ptp(g) > 0 else 0.0
+    return out
 
 
-def demo_closures(demos: DemoSet, task: int) -> tuple[np.ndarray, np.ndarray]:
-    """Each accepted demo's commanded closure while held (median) and held jaw width (median, m),
-    from the trajectory file alone: the width is the policy's (the two finger joints' sum,
+# ManiSkill's articulation state row: root pose (7), root velocity (6), then qpos (n) and qvel (n).
+ROOT_STATE_DIMS = 13
+FINGER_JOINTS = 2  # the last two joints of the Panda's qpos: the jaw gap is their sum
+
+
+def demo_closures(demos: DemoSet, task: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each accepted demo's closure (the expert's draw, the trajectory's ``closure`` attribute, which
+    it commands for the whole hold), its held jaw width (median, m) and the weaker pad's held force
+    (median, N), from the trajectory file alone. The width is the policy's (the finger joints' sum,
     :func:`~mani_skill_softvt.baselines.features.frame_features`), read from the robot's recorded
-    state, which ManiSkill lays out as root pose (7), root velocity (6), qpos (n), qvel (n)."""
-    closures, widths = [], []
-    with open_h5(demos.trajectory(task)) as traj:
+    state, one row per step after the reset's."""
+    path = demos.trajectory(task)
+    closures, widths, grips = [], [], []
+    with open_h5(path) as traj:
         for name in traj:
-            held = np.asarray(traj[name]["evaluator/is_grasped"][()], bool)
+            g = traj[name]
+            held = np.asarray(g["evaluator/is_grasped"][()], bool)
             if not held.any():
                 continue
-            robots = traj[name]["env_states/articulations"]
+            if "closure" not in g.attrs:
+                raise ValueError(f"{path}/{name} has no 'closure' attribute (the expert's draw): it was recorded by "
+                                 "another tool or version; record the demos again with `demos generate`")
+            robots = g["env_states/articulations"]
             if len(robots) != 1:
-                raise ValueError(f"{demos.trajectory(task)}/{name}: expected the robot as the only articulation, "
-                                 f"found {sorted(robots)}")
+                raise ValueError(f"{path}/{name}: expected the robot as the only articulation, found {sorted(robots)}")
             state = next(iter(robots.values()))[()]
-            n = (state.shape[1] - 13) // 2
-            width = state[:, 13 + n - 2:13 + n].sum(axis=1)
-            closures.append(float(np.median(traj[name]["actions"][()][held, GRIPPER])))
-            # The state has one row more than the actions (the reset's): the width after each held step.
+            n = (state.shape[1] - ROOT_STATE_DIMS) // 2
+            width = state[:, ROOT_STATE_DIMS + n - FINGER_JOINTS:ROOT_STATE_DIMS + n].sum(axis=1)
+            closures.append(float(g.attrs["closure"]))
+            # The state has one row more than the steps (the reset's): row t + 1 is after step t.
             widths.append(float(np.median(width[1:][held])))
-    return np.array(closures), np.array(widths)
+            grips.append(float(np.median(np.asarray(g["evaluator/pad_force"][()]).min(axis=1)[held])))
+    return np.array(closures), np.array(widths), np.array(grips)
 
 
 class ClosureLog(Observer):
@@ -154,18 +176,18 @@ class ClosureLog(Observer):
 
 
 def record_check(differing: dict, stored_stacks: list, current_stack: dict) -> dict:
-    """The rerun episodes against their committed records. ``differing``: seed -> the fields that
-    differ (:func:`~mani_skill_softvt.evaluation.runner.record_differences`); ``stored_stacks``: the
-    records' stacks (None for a record that predates them). Records from another machine or stack
-    keep their outcome, not their bits (docs/evaluation.md): there differing bits are expected and
-    only the outcomes are compared. ``records_failed``: bits differ on the same stack, so these are
-    not the episodes the records hold."""
+    """The rerun episodes against their committed records, as ``evaluate --reproduce`` judges them:
+    differing bits fail. ``differing``: seed -> the fields that differ
+    (:func:`~mani_skill_softvt.evaluation.runner.record_differences`); ``stored_stacks``: the
+    records' stacks (None for a record that predates them). What differs between the stacks
+    explains differing bits (docs/evaluation.md: on another stack an episode keeps its outcome, not
+    its bits), and ``records_outcome_differing`` says whether the outcomes held at least."""
     bad = {seed: d for seed, d in differing.items() if d}
     other = "unrecorded" if stored_stacks and not all(stored_stacks) else sorted(
         {d for st in stored_stacks for d in stack_differences(st, current_stack)})
     return {"records_checked": len(differing), "records_differing": bad, "records_stack_differences": other,
             "records_outcome_differing": sorted(seed for seed, d in bad.items() if set(d) & set(OUTCOME_FIELDS)),
-            "records_failed": bool(bad) and not other}
+            "records_failed": bool(bad)}
 
 
 def _run(run, episodes: list[dict], queue) -> list[dict]:
@@ -191,7 +213,7 @@ def _run(run, episodes: list[dict], queue) -> list[dict]:
 
 
 def summary_rows(episodes: list[dict], chunk: int) -> list[dict]:
-    """Per episode: seed, ending, R_max, the expert's draw and :func:`closure_summary`."""
+    """Per episode: seed, ending, R_max, the expert's draw, the envelope's g_min and :func:`closure_summary`."""
     return [{"seed": e["record"]["seed"], "termination": e["record"]["termination"], "r_max": e["record"]["r_max"],
              "expert_closure": e["expert_closure"], "g_min": e["g_min"],
              **closure_summary(e["closure"], e["held"], chunk, e.get("grip"))}
@@ -225,7 +247,8 @@ def plot(results: dict[str, list[dict]], suite: str, task: int, out: Path) -> No
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("policies", nargs="+", help="trained policy files (a run's policy.pt or an exported .pt)")
-    ap.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
+    ap.add_argument("--suite", default="object_soft", choices=sorted(SUITES),
+                    help="the suite the policies were trained on and run in (default object_soft)")
     ap.add_argument("--task", type=int, default=3, help="task id (default 3: on Object-Soft, the soft cube)")
     ap.add_argument("--episodes", type=int, default=6, help=f"the first N ID seeds of the task (1-{ID_EPISODES_PER_TASK})")
     ap.add_argument("--records", type=Path, default=Path("baselines/results"),
@@ -256,7 +279,7 @@ def main(argv=None) -> dict:
     if args.demos is not None:
         try:
             readout = closure_readout(*demo_closures(DemoSet(args.demos, args.suite), args.task))
-        except (FileNotFoundError, OSError, ValueError) as e:
+        except (OSError, ValueError, KeyError) as e:  # a missing, truncated or foreign demo file
             ap.error(f"--demos {args.demos}: {e}")
 
     eps = next(iter(runs.values())).episodes()
@@ -305,14 +328,15 @@ def main(argv=None) -> dict:
         print(f"\ndemos of {args.suite} task {args.task}: {readout['demos']} closures in "
               f"[{readout['closure_range'][0]:.2f}, {readout['closure_range'][1]:.2f}] held the jaw at "
               f"{readout['width_range_mm'][0]:.2f}-{readout['width_range_mm'][1]:.2f} mm; width against closure: "
-              f"r = {readout['corr']:+.2f}, {readout['slope_mm']:+.1f} mm per unit")
+              f"r = {readout['corr']:+.2f}, {readout['slope_mm']:+.1f} mm per unit; the weaker pad's held force "
+              f"against closure: r = {readout['grip_corr']:+.2f}")
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"closure_{args.suite}_task{args.task}"
     atomic_write_json(stem.with_suffix(".json"), report)
     plot(results, args.suite, args.task, stem.with_suffix(".png"))
     print(f"\n{stem.with_suffix('.json')}  {stem.with_suffix('.png')}")
     if any(p["records_failed"] for p in report["policies"].values()):
-        raise SystemExit(1)
+        raise SystemExit(1)  # not the episodes the records hold, bit for bit (as evaluate --reproduce)
     return report
 
 
