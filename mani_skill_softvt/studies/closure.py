@@ -50,10 +50,9 @@ from ..evaluation.runner import record_differences, run_episode, run_records
 from ..evaluation.wrapper import make_env
 from ..expert.pick_place import draw_closure
 from ..fileio import atomic_write, atomic_write_json
-from ..observations import info_bool
 from ..parallel import run_tasks
 from ..physics.constants import CONTROL_FREQ
-from ..rollout import Observer
+from ..rollout import EvaluatorTrace, Observer
 from ..stack import software_stack, stack_differences
 from ..tasks.suites import NUM_TASKS, SUITES
 
@@ -160,19 +159,14 @@ def demo_closures(demos: DemoSet, task: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 class ClosureLog(Observer):
-    """Each step's commanded closure, whether the env said the object was held, and the force on
-    the weaker pad (the evaluator's accessor: the study watches, the policy never sees it)."""
+    """Each step's commanded closure (what the evaluator's trace does not keep)."""
 
     def __init__(self, gripper_column: int):
         self.gripper_column = gripper_column
         self.closure: list[float] = []
-        self.held: list[bool] = []
-        self.grip: list[float] = []
 
     def on_step(self, env, action, obs, info):
         self.closure.append(float(np.asarray(action)[self.gripper_column]))
-        self.held.append(info_bool(info, "is_grasped"))
-        self.grip.append(min(env.unwrapped.pad_forces().values()))
 
 
 def record_check(differing: dict, stored_stacks: list, current_stack: dict) -> dict:
@@ -199,12 +193,14 @@ def _run(run, episodes: list[dict], queue) -> list[dict]:
     out = []
     try:
         for ep in episodes:
-            log = ClosureLog(GRIPPER)
+            # Whether the object was held and the pads' force: the evaluator's own trace, the weaker pad kept.
+            log, trace = ClosureLog(GRIPPER), EvaluatorTrace()
             record = run_episode(env, policy, ep, policy_spec=run.policy.spec, policy_sha256=run.policy.sha256,
-                                 observers=[log])
+                                 observers=[log, trace])
+            steps = trace.arrays()
             card = env.calibration_card
-            out.append({"record": record, "chunk": policy.cfg.action_steps, "closure": log.closure, "held": log.held,
-                        "grip": log.grip,
+            out.append({"record": record, "chunk": policy.cfg.action_steps, "closure": log.closure,
+                        "held": steps["is_grasped"].tolist(), "grip": steps["pad_force"].min(axis=1).tolist(),
                         "expert_closure": draw_closure(card, ep["seed"]), "g_min": card.g_min, "g_max": card.g_max})
             queue.put(ep["seed"])
     finally:
