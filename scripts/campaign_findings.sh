@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# The findings campaign's remaining runs (docs/baselines.md "What runs next"), as two lanes of one
+# core each, both resumable: run the same command again, in any later session, and each step
+# skips what it finds done (the demos' QC logs, a training's checkpoint, an evaluation's records).
+#   bash scripts/campaign_findings.sh rigid   # VT-C on Object-Rigid, its closure study; then vt-c seed 1, vt-b
+#   bash scripts/campaign_findings.sh soft    # the Object-Soft demos; then vo-c seed 1, vo-b
+# Run it from a git worktree at a fixed commit (no code change under a running evaluation), e.g.
+#   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
+#     scripts/campaign_findings.sh rigid > /work/lane-rigid.log 2>&1 &
+# Its products (policies, records, reports, QC logs) land in that worktree's baselines/ and demos/,
+# to be copied into main and committed as each finishes. Stores stay outside the checkout
+# (SOFTVT_DEMOS_DIR, SOFTVT_RUNS_DIR): on a machine without them the demos are recorded again from
+# the committed QC logs and a training starts again from step 0 (a checkpoint is too large to commit).
+# The two lanes share the Object-Soft demo store: whichever lane needs it holds a lock while it
+# records or completes it, so the other waits rather than writing the same files.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+LANE=${1:-}
+export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
+export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
+export PY=${PY:-.venv/bin/python}
+BUDGET=${BUDGET_MIN:-100000}  # minutes a training may run before it stops at a checkpoint
+mkdir -p "$SOFTVT_DEMOS_DIR"
+
+step() { printf '\n[campaign %s] %s  %s\n' "$LANE" "$(date -u +%H:%M:%S)" "$*"; }
+
+soft_demos() {  # 1,000 accepted Object-Soft demos rendered at 84 px; one lane at a time
+  step "Object-Soft demos (waits while the other lane records them)"
+  flock "$SOFTVT_DEMOS_DIR/.object_soft.lock" bash scripts/campaign_demos.sh 100 1
+}
+
+train_and_score() {  # SUITE VARIANT NAME [SET]: the recipe of the committed Object-Soft policies
+  local suite=$1 variant=$2 name=$3 set=${4:-}
+  step "$variant on $suite as $name: training (24,000 steps), export, 500 ID episodes, report"
+  SUITE=$suite SET="steps=24000 $set" bash scripts/campaign_protocol.sh "$variant" noaug 1 "$BUDGET" "$name"
+}
+
+case "$LANE" in
+  rigid)
+    step "Object-Rigid demos"
+    SUITE=object_rigid bash scripts/campaign_demos.sh 100 1
+    train_and_score object_rigid vt-c vt-c-cpu
+    for task in 2 7; do  # does touch keep the closure the rigid VO-C redraws? (findings.md, Finding 2)
+      step "closure study, Object-Rigid task $task, VO-C and VT-C"
+      "$PY" -m mani_skill_softvt.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
+        baselines/policies/object_rigid/vt-c-cpu.pt --suite object_rigid --task "$task" --episodes 10 \
+        --demos "$SOFTVT_DEMOS_DIR" --out baselines/results || step "closure study task $task: records differ (see above)"
+    done
+    soft_demos
+    train_and_score object_soft vt-c vt-c-cpu-seed1 seed=1
+    train_and_score object_soft vt-b vt-b-cpu
+    ;;
+  soft)
+    soft_demos
+    train_and_score object_soft vo-c vo-c-cpu-seed1 seed=1
+    train_and_score object_soft vo-b vo-b-cpu
+    ;;
+  *)
+    echo "usage: $0 rigid|soft  (two lanes of the findings campaign, one core each; see the header)" >&2
+    exit 2
+    ;;
+esac
+step "lane done"
