@@ -7,6 +7,7 @@ say why a reproduction differs instead of leaving it unexplained.
 
 from __future__ import annotations
 
+import os
 import platform
 from functools import lru_cache
 from importlib import metadata
@@ -34,10 +35,44 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+# CPU features that choose a kernel's arithmetic, not only its speed. oneDNN runs the policies'
+# bfloat16 products on AMX tiles where the CPU has them, else with AVX-512 BF16 instructions, else
+# emulated, and each rounds differently (measured: the same denoised chunk differs in its fourth
+# digit); NumPy and OpenBLAS pick AVX-512 or AVX2 kernels at run time. A virtual machine may name
+# every Intel CPU "Intel(R) Xeon(R) Processor", so the model name alone cannot tell them apart.
+ARITHMETIC_CPU_FLAGS = ("amx_bf16", "avx512_bf16", "avx512f", "avx2", "fma")
+
+
+def cpu_isa(flags: set[str] | None = None, torch_capability: str | None = None,
+            onednn_max_isa: str | None = None) -> str:
+    """``"AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"``: torch's vector capability, then those of
+    :data:`ARITHMETIC_CPU_FLAGS` the CPU has, then oneDNN's ISA cap if ``ONEDNN_MAX_CPU_ISA`` sets one.
+    Arguments left None are read from this machine."""
+    if flags is None:
+        flags = _cpu_flags()
+    if torch_capability is None:
+        torch_capability = torch.backends.cpu.get_cpu_capability()
+    if onednn_max_isa is None:
+        onednn_max_isa = os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or ""
+    parts = [torch_capability] + [f for f in ARITHMETIC_CPU_FLAGS if f in flags]
+    return " ".join(parts + ([f"onednn_max={onednn_max_isa}"] if onednn_max_isa else []))
+
+
+def _cpu_flags() -> set[str]:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith(("flags", "Features")):  # x86, arm
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
 @lru_cache(maxsize=1)
 def _stack() -> tuple[tuple[str, str | None], ...]:
     out = {"python": platform.python_version(), "mani-skill-softvt": __version__, "opencv": cv2.__version__,
-           "cpu": cpu_model()}
+           "cpu": cpu_model(), "cpu-isa": cpu_isa()}
     for dist in STACK_DISTRIBUTIONS:
         try:
             out[dist] = metadata.version(dist)

@@ -151,6 +151,45 @@ def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
         assert torch.allclose(nhwc(img), nchw(img), rtol=1e-5, atol=1e-6)
 
 
+def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatch):
+    # A chunk's 16 denoising steps reuse autocast's bfloat16 copies of the U-Net weights. The copies
+    # are the same values, so the chunk must equal, bit for bit, one whose every U-Net call casts
+    # afresh (what sampling did before); and the copies must not outlive the chunk: after the
+    # weights change (as training changes them), the next chunk follows the new weights.
+    import contextlib
+
+    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
+
+    cfg = make_config("vt-c", **{**TINY, "precision": "bf16"})
+    torch.manual_seed(0)
+    model = DiffusionPolicyModel(cfg, T.empty_stats(cfg)).eval()
+    g = torch.Generator().manual_seed(1)
+    obs = {"state": torch.rand(1, 2, 7, generator=g), "markers": torch.randn(1, 2, 2, 99, 2, generator=g)}
+    for k in model.image_keys:
+        h, w = cfg.tactile_size if k.startswith("tactile") else cfg.camera_size
+        obs[k] = torch.randint(0, 256, (1, 2, h, w, cfg.tactile_channels if k.startswith("tactile") else 3),
+                               generator=g, dtype=torch.uint8)
+    sample = lambda: model.sample(obs, torch.Generator().manual_seed(2), noise_scheduler(cfg, inference=True))
+    real = type(model).weight_cast_cache
+
+    def both() -> tuple[torch.Tensor, torch.Tensor]:
+        monkeypatch.setattr(type(model), "weight_cast_cache", real)
+        cached = sample()
+        monkeypatch.setattr(type(model), "weight_cast_cache", lambda self: contextlib.nullcontext())
+        return cached, sample()
+
+    cached, fresh = both()
+    assert torch.isfinite(cached).all() and torch.equal(cached, fresh)
+    assert not torch.is_autocast_enabled("cpu")
+    with torch.no_grad():
+        for p in model.unet.parameters():
+            p.mul_(1.01)
+    cached2, fresh2 = both()
+    assert torch.equal(cached2, fresh2) and not torch.equal(cached2, cached)
+    fp32 = make_config("vt-c", **{**TINY, "precision": "fp32"})
+    assert isinstance(DiffusionPolicyModel(fp32, T.empty_stats(fp32)).weight_cast_cache(), contextlib.nullcontext)
+
+
 def test_paper_preset_has_the_papers_parameter_count():
     # Appendix, table of VO/VT variants: Diffusion Policy VO has 329.2M trainable parameters.
     from mani_skill_softvt.baselines.model import DiffusionPolicyModel
