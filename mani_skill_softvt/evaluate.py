@@ -32,7 +32,7 @@ from .evaluation.run import DEFAULT_TASKS, RunConfig
 from .evaluation.runner import evaluate, relative_difference, reproduce, run_records
 from .evaluation.videos import record_episode_video, video_name
 from .observations import parse_image_size
-from .stack import software_stack, stack_differences
+from .stack import software_stack, stack_differences, unrecorded
 from .tasks.suites import SUITES, task_spec
 
 
@@ -137,9 +137,14 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
     print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
     other = stack_differences(results[0][0]["receipt"].get("stack"), software_stack()) if results else []
-    if other:
-        print(f"the records were made on another stack ({'; '.join(other)}): the same episode keeps its outcome "
+    unknown = unrecorded(other)
+    mismatched = [d for d in other if not d.endswith(" unrecorded")]
+    if mismatched:
+        print(f"the records were made on another stack ({'; '.join(mismatched)}): the same episode keeps its outcome "
               "there, not its bits, so compare rates rather than records")
+    if unknown:
+        print(f"the records do not name their {', '.join(unknown)} (kept only since they were made): if they differ, "
+              "the machine that made them may have differed there")
     elif results and "stack" not in results[0][0]["receipt"]:
         print("the records predate the stack being recorded: if they differ, compare the stack they were made on "
               "(docs/evaluation.md) with this one")

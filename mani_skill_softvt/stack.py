@@ -54,7 +54,7 @@ def cpu_isa(flags: set[str] | None = None, torch_capability: str | None = None,
         torch_capability = torch.backends.cpu.get_cpu_capability()
     if onednn_max_isa is None:
         onednn_max_isa = os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or ""
-    parts = [torch_capability] + [f for f in ARITHMETIC_CPU_FLAGS if f in flags]
+    parts = [torch_capability.replace(" ", "_")] + [f for f in ARITHMETIC_CPU_FLAGS if f in flags]
     return " ".join(parts + ([f"onednn_max={onednn_max_isa}"] if onednn_max_isa else []))
 
 
@@ -89,9 +89,15 @@ def software_stack() -> dict[str, str | None]:
 
 
 def stack_differences(recorded: dict | None, current: dict) -> list[str]:
-    """``["torch 2.13.0 -> 2.11.0", ...]``: what differs between a recorded stack and this one
-    (empty when they are the same or the record predates stacks being recorded)."""
+    """``["torch 2.13.0 -> 2.11.0", "cpu-isa unrecorded", ...]``: what differs between a recorded stack
+    and this one (empty when they are the same or the record predates stacks being recorded). A key
+    the record lacks, named only since it was made, reads ``"<key> unrecorded"``: unknown, not different."""
     if not recorded:
         return []
-    return [f"{k} {recorded.get(k)} -> {current.get(k)}" for k in sorted(set(recorded) | set(current))
-            if recorded.get(k) != current.get(k)]
+    return [f"{k} unrecorded" if k not in recorded else f"{k} {recorded.get(k)} -> {current.get(k)}"
+            for k in sorted(set(recorded) | set(current)) if recorded.get(k) != current.get(k)]
+
+
+def unrecorded(differences: list[str]) -> list[str]:
+    """The keys of :func:`stack_differences` that the record lacks (the rest are real mismatches)."""
+    return [d.removesuffix(" unrecorded") for d in differences if d.endswith(" unrecorded")]

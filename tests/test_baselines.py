@@ -158,6 +158,8 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
     # weights change (as training changes them), the next chunk follows the new weights.
     import contextlib
 
+    from torch.utils._python_dispatch import TorchDispatchMode
+
     from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
 
     cfg = make_config("vt-c", **{**TINY, "precision": "bf16"})
@@ -172,11 +174,30 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
     sample = lambda: model.sample(obs, torch.Generator().manual_seed(2), noise_scheduler(cfg, inference=True))
     real = type(model).weight_cast_cache
 
+    weights = {p.data_ptr() for p in model.parameters()}
+
+    class WeightCasts(TorchDispatchMode):  # counts each weight's copy into bfloat16
+        def __init__(self):
+            super().__init__()
+            self.n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            kwargs = kwargs or {}
+            if func is torch.ops.aten._to_copy.default and kwargs.get("dtype") == torch.bfloat16 \
+                    and args[0].data_ptr() in weights:
+                self.n += 1
+            return func(*args, **kwargs)
+
     def both() -> tuple[torch.Tensor, torch.Tensor]:
         monkeypatch.setattr(type(model), "weight_cast_cache", real)
-        cached = sample()
+        with WeightCasts() as once:
+            cached = sample()
         monkeypatch.setattr(type(model), "weight_cast_cache", lambda self: contextlib.nullcontext())
-        return cached, sample()
+        with WeightCasts() as per_call:
+            fresh = sample()
+        # each U-Net weight once per chunk instead of once per denoising call (16 of them)
+        assert 0 < once.n < per_call.n / 2
+        return cached, fresh
 
     cached, fresh = both()
     assert torch.isfinite(cached).all() and torch.equal(cached, fresh)

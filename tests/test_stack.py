@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from mani_skill_softvt.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, software_stack, stack_differences
+from mani_skill_softvt.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, software_stack, stack_differences, unrecorded
 
 
 def test_cpu_isa_names_the_features_that_choose_the_arithmetic():
@@ -17,8 +17,10 @@ def test_cpu_isa_names_the_features_that_choose_the_arithmetic():
     assert cpu_isa({"avx2", "fma"}, "AVX2", "AVX2") == "AVX2 avx2 fma onednn_max=AVX2"  # a cap is named
     old, new = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": no_amx}, {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": amx}
     assert stack_differences(old, new) == [f"cpu-isa {no_amx} -> {amx}"]
-    # A record from before the ISA was named says so rather than passing for the same stack.
-    assert stack_differences({"cpu": "Intel(R) Xeon(R) Processor"}, new) == [f"cpu-isa None -> {amx}"]
+    # A record from before the ISA was named says it is unknown, neither the same nor different.
+    assert stack_differences({"cpu": "Intel(R) Xeon(R) Processor"}, new) == ["cpu-isa unrecorded"]
+    assert unrecorded(["cpu-isa unrecorded", "torch 2.13.0 -> 2.11.0"]) == ["cpu-isa"]
+    assert cpu_isa(set(), "NO AVX", "").split() == ["NO_AVX"]  # one word per part, whatever torch names
 
 
 def test_this_machines_stack_names_its_cpu_isa():

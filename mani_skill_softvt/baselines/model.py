@@ -98,10 +98,10 @@ class DiffusionPolicyModel(nn.Module):
         for bit (tests/test_baselines.py) and about a third cheaper in bf16 on the CPU
         (benchmarks/bench_train_step.py). Only for frozen weights: training changes them every step.
         """
-        if self.cfg.precision != "bf16":
+        device = self.normalize["action"].scale.device.type
+        if self.cfg.precision != "bf16" or torch.is_autocast_enabled(device):  # a caller's autocast keeps them already
             return contextlib.nullcontext()
-        return torch.autocast(device_type=self.normalize["action"].scale.device.type, dtype=torch.bfloat16,
-                              enabled=False)
+        return torch.autocast(device_type=device, dtype=torch.bfloat16, enabled=False)
 
     def denoise(self, sample: torch.Tensor, step: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """The U-Net's noise prediction, float32 whatever the precision."""
