@@ -116,6 +116,16 @@ def test_config_presets_and_overrides():
         make_config("vo-c", precision="fp16")
 
 
+def random_window(cfg, image_keys, batch: int, g: torch.Generator) -> dict:
+    """A random vt observation window of ``batch`` (obs_horizon 2): state, markers, uint8 images."""
+    obs = {"state": torch.rand(batch, 2, 7, generator=g), "markers": torch.randn(batch, 2, 2, 99, 2, generator=g)}
+    for k in image_keys:
+        h, w = cfg.tactile_size if k.startswith("tactile") else cfg.camera_size
+        obs[k] = torch.randint(0, 256, (batch, 2, h, w, cfg.tactile_channels if k.startswith("tactile") else 3),
+                               generator=g, dtype=torch.uint8)
+    return obs
+
+
 def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
     # bfloat16 keeps 8 significant bits: each product is rounded by at most 2^-9 relative, and the
     # errors of a few dozen layers add up at random (sqrt(n) 2^-9, ~2 %). The same weights in
@@ -131,11 +141,7 @@ def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
     m16 = DiffusionPolicyModel(cfg16, T.empty_stats(cfg16))
     m16.load_state_dict(m32.state_dict())
     g = torch.Generator().manual_seed(1)
-    obs = {"state": torch.rand(3, 2, 7, generator=g), "markers": torch.randn(3, 2, 2, 99, 2, generator=g)}
-    for k in m32.image_keys:
-        h, w = cfg32.tactile_size if k.startswith("tactile") else cfg32.camera_size
-        obs[k] = torch.randint(0, 256, (3, 2, h, w, cfg32.tactile_channels if k.startswith("tactile") else 3),
-                               generator=g, dtype=torch.uint8)
+    obs = random_window(cfg32, m32.image_keys, 3, g)
     with torch.no_grad():
         c32, c16 = m32.encode(obs), m16.encode(obs)
         x, t = torch.randn(3, 16, 7, generator=g), torch.tensor([0, 7, 19])
@@ -165,12 +171,7 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
     cfg = make_config("vt-c", **{**TINY, "precision": "bf16"})
     torch.manual_seed(0)
     model = DiffusionPolicyModel(cfg, T.empty_stats(cfg)).eval()
-    g = torch.Generator().manual_seed(1)
-    obs = {"state": torch.rand(1, 2, 7, generator=g), "markers": torch.randn(1, 2, 2, 99, 2, generator=g)}
-    for k in model.image_keys:
-        h, w = cfg.tactile_size if k.startswith("tactile") else cfg.camera_size
-        obs[k] = torch.randint(0, 256, (1, 2, h, w, cfg.tactile_channels if k.startswith("tactile") else 3),
-                               generator=g, dtype=torch.uint8)
+    obs = random_window(cfg, model.image_keys, 1, torch.Generator().manual_seed(1))
     sample = lambda: model.sample(obs, torch.Generator().manual_seed(2), noise_scheduler(cfg, inference=True))
     real = type(model).weight_cast_cache
 
