@@ -22,16 +22,26 @@ from .version import __version__
 STACK_DISTRIBUTIONS = ("torch", "numpy", "warp-lang", "newton", "sapien", "mani-skill", "diffusers")
 
 
-def cpu_model() -> str:
+def cpu_model(cpuinfo: str | None = None) -> str:
     """The processor's model name: machines of one kind can differ in it (an AMD EPYC and an Intel
-    Xeon round the same episode differently, and a learned policy's closed loop amplifies that)."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
+    Xeon round the same episode differently, and a learned policy's closed loop amplifies that).
+    ``cpuinfo``: the text of /proc/cpuinfo (None: read this machine's)."""
+    if cpuinfo is None:
+        try:
+            with open("/proc/cpuinfo") as fh:
+                cpuinfo = fh.read()
+        except OSError:
+            cpuinfo = ""
+    arm: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        key = key.strip()
+        if key == "model name":
+            return value.strip()
+        if key in ("CPU implementer", "CPU part"):  # ARM kernels name no model: these identify the core
+            arm.setdefault(key, value.strip())
+    if len(arm) == 2:
+        return f"{platform.machine()} implementer {arm['CPU implementer']} part {arm['CPU part']}"
     return platform.processor() or platform.machine()
 
 
@@ -40,7 +50,10 @@ def cpu_model() -> str:
 # emulated, and each rounds differently (measured: the same denoised chunk differs in its fourth
 # digit); NumPy and OpenBLAS pick AVX-512 or AVX2 kernels at run time. A virtual machine may name
 # every Intel CPU "Intel(R) Xeon(R) Processor", so the model name alone cannot tell them apart.
-ARITHMETIC_CPU_FLAGS = ("amx_bf16", "avx512_bf16", "avx512f", "avx2", "fma")
+# On ARM (``Features`` in /proc/cpuinfo) the same choice is between SVE/SVE2 and NEON (asimd)
+# kernels, and bfloat16 products with the BF16 and I8MM extensions or emulated.
+ARITHMETIC_CPU_FLAGS = ("amx_bf16", "avx512_bf16", "avx512f", "avx2", "fma",  # x86
+                        "sve2", "sve", "bf16", "i8mm", "asimd")  # arm
 
 
 def cpu_isa(flags: set[str] | None = None, torch_capability: str | None = None,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from mani_skill_softvt.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, software_stack, stack_differences, unrecorded
+from mani_skill_softvt.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, cpu_model, software_stack, stack_differences, unrecorded
 
 
 def test_cpu_isa_names_the_features_that_choose_the_arithmetic():
@@ -21,6 +21,18 @@ def test_cpu_isa_names_the_features_that_choose_the_arithmetic():
     assert stack_differences({"cpu": "Intel(R) Xeon(R) Processor"}, new) == ["cpu-isa unrecorded"]
     assert unrecorded(["cpu-isa unrecorded", "torch 2.13.0 -> 2.11.0"]) == ["cpu-isa"]
     assert cpu_isa(set(), "NO AVX", "").split() == ["NO_AVX"]  # one word per part, whatever torch names
+
+
+def test_arm_machines_are_told_apart_by_their_vector_extensions_and_core():
+    # /proc/cpuinfo of a Neoverse V1 (SVE, BF16) and a Neoverse N1 (NEON only), shortened: oneDNN
+    # takes other bfloat16 kernels on each, and neither kernel names a model.
+    v1 = "fp asimd aes sha2 crc32 atomics fphp asimdhp asimddp sve svebf16 i8mm bf16 rng"
+    n1 = "fp asimd aes sha2 crc32 atomics fphp asimdhp asimddp ssbs"
+    assert cpu_isa(set(v1.split()), "SVE256", "") == "SVE256 sve bf16 i8mm asimd"
+    assert cpu_isa(set(n1.split()), "DEFAULT", "") == "DEFAULT asimd"
+    info = f"processor\t: 0\nBogoMIPS\t: 2100.00\nFeatures\t: {v1}\nCPU implementer\t: 0x41\nCPU part\t: 0xd40\n"
+    assert cpu_model(info).endswith("implementer 0x41 part 0xd40")
+    assert cpu_model("processor\t: 0\nmodel name\t: AMD EPYC 9R14\n") == "AMD EPYC 9R14"
 
 
 def test_this_machines_stack_names_its_cpu_isa():
