@@ -144,12 +144,13 @@ def test_closure_and_binary_gripper_encodings():
 
     assert closure_to_q(0.0) == C.GRIPPER_Q_OPEN and closure_to_q(1.0) == C.GRIPPER_Q_CLOSED
     assert q_to_closure(closure_to_q(0.37)) == pytest.approx(0.37)
-    for mode, g, expected in (("pd_ee_pose", 0.3, closure_to_q(0.3)), ("pd_ee_pose_binary", 0.7, C.GRIPPER_Q_CLOSED),
-                              ("pd_ee_pose_binary", 0.2, C.GRIPPER_Q_OPEN)):
-        e = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode=mode)
+    for mode, cases in (("pd_ee_pose", ((0.3, closure_to_q(0.3)),)),
+                        ("pd_ee_pose_binary", ((0.7, C.GRIPPER_Q_CLOSED), (0.2, C.GRIPPER_Q_OPEN)))):
+        e = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode=mode)  # one env per mode: a build is ~10 s
         e.reset(seed=0)
         assert e.action_space.shape == (7,)
-        e.unwrapped.agent.controller.controllers["gripper"].set_action(np.array([[g]], np.float32))
-        target = e.unwrapped.agent.controller.controllers["gripper"]._target_qpos[0].numpy()
-        assert target == pytest.approx([expected, expected], abs=1e-7)
+        for g, expected in cases:
+            e.unwrapped.agent.controller.controllers["gripper"].set_action(np.array([[g]], np.float32))
+            target = e.unwrapped.agent.controller.controllers["gripper"]._target_qpos[0].numpy()
+            assert target == pytest.approx([expected, expected], abs=1e-7)
         e.close()
