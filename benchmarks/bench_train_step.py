@@ -12,6 +12,15 @@ also timed as sampling ran before ``DiffusionPolicyModel.weight_cast_cache``, ev
 casting the weights afresh (``chunk ms, cast per call``; the same actions bit for bit). The cost does not
 depend on the weights or the pixel values, so untrained weights and random images are timed.
 One thread is what each of the campaign's two parallel training runs gets.
+
+With ``--demos DIR`` a second table times the preset's step on real demo windows (``load_windows``
+through ``--cache``: memory-mapped frames, the epoch's permutation, the gather) against the
+synthetic batch, in alternating blocks of the same run so that the other jobs on the machine load
+both alike: what the data path adds to a training step. ``--suite`` and ``--tasks`` pick the
+demos (a few tasks are enough: the gather's cost per sample does not grow with the set).
+
+    .venv/bin/python benchmarks/bench_train_step.py --variants vt-c --demos /root/softvt-demos \
+        --suite object_rigid --tasks 0 --cache /tmp/bench-cache
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -92,12 +102,46 @@ def time_setting(variant: str, precision: str, channels_last: bool, steps: int,
     return step_ms, cached, chunk_ms()
 
 
+def time_demo_windows(variant: str, demos, suite: str, tasks: list[int], cache, steps: int,
+                      blocks: int = 5) -> dict:
+    """Median ms per preset training step on the demo windows and on the synthetic batch, and per
+    batch gather alone, over ``blocks`` alternating blocks of ``steps // blocks`` steps."""
+    from mani_skill_softvt.baselines.config import make_config
+    from mani_skill_softvt.baselines.dataset import load_windows
+    from mani_skill_softvt.baselines.train import Training, batch_indices
+
+    cfg = make_config(variant, "cpu", suite=suite, tasks=tuple(tasks), threads=0)
+    windows = load_windows(cfg, demos, cache)
+    run = Training(cfg, windows.stats(), steps=10 * steps + 6)
+    synthetic = SyntheticWindows(cfg, run.model)
+    for _ in range(3):  # warm-up, both inputs
+        run.train_step(windows)
+        run.train_step(synthetic)
+    per_block = max(1, steps // blocks)
+    times: dict[str, list[float]] = {"demo": [], "synthetic": [], "gather": []}
+    for _ in range(blocks):
+        for name, data in (("demo", windows), ("synthetic", synthetic)):
+            t0 = time.perf_counter()
+            for _ in range(per_block):
+                run.train_step(data)
+            times[name].append(1e3 * (time.perf_counter() - t0) / per_block)
+        t0 = time.perf_counter()
+        for k in range(per_block):
+            windows.batch(batch_indices(cfg, len(windows), run.step + k))
+        times["gather"].append(1e3 * (time.perf_counter() - t0) / per_block)
+    return {"samples": len(windows), **{k: float(np.median(v)) for k, v in times.items()}}
+
+
 def main(argv=None) -> str:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=20, help="timed optimiser steps per setting")
     ap.add_argument("--chunks", type=int, default=10, help="timed denoised chunks per setting")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--variants", nargs="+", default=["vo-c", "vt-c"])
+    ap.add_argument("--demos", type=Path, default=None, help="also time the step on these rendered demos' windows")
+    ap.add_argument("--suite", default="object_soft", help="with --demos: the suite whose demos are read")
+    ap.add_argument("--tasks", type=int, nargs="+", default=[0], help="with --demos: the tasks read")
+    ap.add_argument("--cache", type=Path, default=None, help="with --demos: the prepared-data directory")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s)", "",
@@ -112,6 +156,15 @@ def main(argv=None) -> str:
             lines.append(f"| {variant} | {precision} | {'channels-last' if cl else 'NCHW'} | {step_ms:.1f} | "
                          f"{step_ms / ref[0]:.2f} | {1e3 / step_ms:.2f} | {chunk_ms:.1f} | {chunk_ms / ref[1]:.2f} | "
                          f"{per_call} |")
+            print(lines[-1], flush=True)
+    if args.demos is not None:
+        lines += ["", f"preset step on demo windows ({args.suite}, tasks {args.tasks}) against the synthetic batch, "
+                      "alternating blocks", "",
+                  "| variant | samples | synthetic ms | demo windows ms | x synthetic | gather ms |", "|---|---|---|---|---|---|"]
+        for variant in args.variants:
+            t = time_demo_windows(variant, args.demos, args.suite, args.tasks, args.cache, args.steps)
+            lines.append(f"| {variant} | {t['samples']} | {t['synthetic']:.1f} | {t['demo']:.1f} | "
+                         f"{t['demo'] / t['synthetic']:.2f} | {t['gather']:.1f} |")
             print(lines[-1], flush=True)
     table = "\n".join(lines)
     print()
