@@ -261,6 +261,22 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
     w3 = load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
     entries = sorted(p.name for p in cache.iterdir() if not p.name.startswith("."))
     assert w3.frames["base"].shape[1:3] == (8, 8) and entries == sorted([w1.key, w3.key])
+    # Arrays another entry holds byte for byte are shared (hard links), the rest are the entry's own:
+    # the 8x8 entry reads the same state and actions but other camera frames.
+    ino = lambda key, name: (cache / key / f"{name}.npy").stat().st_ino
+    assert ino(w3.key, "frame_state") == ino(w1.key, "frame_state") and ino(w3.key, "actions") == ino(w1.key, "actions")
+    assert ino(w3.key, "frame_base") != ino(w1.key, "frame_base")
+    # VT on the same demos shares VO's cameras and actions and holds its touch alone, the same
+    # arrays as prepared without a cache; the binary variant's actions are its own.
+    vt_c = load_windows(make_config("vt-c", **TINY), tmp_path / "demos", cache)
+    assert ino(vt_c.key, "frame_base") == ino(w1.key, "frame_base") and ino(vt_c.key, "actions") == ino(w1.key, "actions")
+    vt_fresh = load_windows(make_config("vt-c", **TINY), tmp_path / "demos", None)
+    assert all(np.array_equal(vt_fresh.frames[k], vt_c.frames[k]) for k in vt_fresh.frames)
+    vo_b = load_windows(make_config("vo-b", **TINY), tmp_path / "demos", cache)
+    assert ino(vo_b.key, "frame_base") == ino(w1.key, "frame_base") and ino(vo_b.key, "actions") != ino(w1.key, "actions")
+    shutil.rmtree(cache / vt_c.key)
+    shutil.rmtree(cache / vo_b.key)  # deleting an entry leaves the others whole
+    assert np.array_equal(load_windows(cfg, tmp_path / "demos", cache).frames["base"], fresh.frames["base"])
     # A temporary directory of a process that died is removed; an older version's cache file is refused.
     from mani_skill_softvt.baselines import dataset as D
 
