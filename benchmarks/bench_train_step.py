@@ -141,8 +141,11 @@ def main(argv=None) -> str:
     ap.add_argument("--demos", type=Path, default=None, help="also time the step on these rendered demos' windows")
     ap.add_argument("--suite", default="object_soft", help="with --demos: the suite whose demos are read")
     ap.add_argument("--tasks", type=int, nargs="+", default=[0], help="with --demos: the tasks read")
-    ap.add_argument("--cache", type=Path, default=None, help="with --demos: the prepared-data directory")
+    ap.add_argument("--cache", type=Path, default=None,
+                    help="with --demos (required): the prepared-data directory, memory-mapped as in training")
     args = ap.parse_args(argv)
+    if args.demos is not None and args.cache is None:
+        ap.error("--demos needs --cache DIR: training reads its windows memory-mapped from a data cache")
     torch.set_num_threads(args.threads)
     lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s)", "",
              "| variant | precision | images | step ms | x fp32 | steps/s | chunk ms | x fp32 | chunk ms, cast per call |",

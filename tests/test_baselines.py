@@ -261,6 +261,8 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
     w3 = load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
     entries = sorted(p.name for p in cache.iterdir() if not p.name.startswith("."))
     assert w3.frames["base"].shape[1:3] == (8, 8) and entries == sorted([w1.key, w3.key])
+    from mani_skill_softvt.baselines import dataset as D
+
     # Arrays another entry holds byte for byte are shared (hard links), the rest are the entry's own:
     # the 8x8 entry reads the same state and actions but other camera frames.
     ino = lambda key, name: (cache / key / f"{name}.npy").stat().st_ino
@@ -272,13 +274,25 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
     assert ino(vt_c.key, "frame_base") == ino(w1.key, "frame_base") and ino(vt_c.key, "actions") == ino(w1.key, "actions")
     vt_fresh = load_windows(make_config("vt-c", **TINY), tmp_path / "demos", None)
     assert all(np.array_equal(vt_fresh.frames[k], vt_c.frames[k]) for k in vt_fresh.frames)
+    assert np.array_equal(vt_fresh.actions, vt_c.actions)
     vo_b = load_windows(make_config("vo-b", **TINY), tmp_path / "demos", cache)
     assert ino(vo_b.key, "frame_base") == ino(w1.key, "frame_base") and ino(vo_b.key, "actions") != ino(w1.key, "actions")
-    shutil.rmtree(cache / vt_c.key)
-    shutil.rmtree(cache / vo_b.key)  # deleting an entry leaves the others whole
-    assert np.array_equal(load_windows(cfg, tmp_path / "demos", cache).frames["base"], fresh.frames["base"])
+    # VO's files are all inside VT's entry now: counted once, they add nothing to its size.
+    assert D.cache_size_gb([cache / w1.key, cache / vt_c.key]) == pytest.approx(D.cache_size_gb([cache / vt_c.key]))
+    # Deleting the entry that first held the shared files leaves the others whole.
+    shutil.rmtree(cache / w1.key)
+    again = load_windows(make_config("vt-c", **TINY), tmp_path / "demos", cache)
+    assert all(np.array_equal(vt_fresh.frames[k], again.frames[k]) for k in vt_fresh.frames)
+    assert np.array_equal(vt_fresh.actions, again.actions)
+    # Without hard links (a filesystem that refuses them) an entry keeps its own copies.
+    shutil.rmtree(cache / vo_b.key)
+    with monkeypatch.context() as m:
+        m.setattr(D.os, "link", lambda *a: (_ for _ in ()).throw(PermissionError(1, "no links")))
+        vo_b2 = load_windows(make_config("vo-b", **TINY), tmp_path / "demos", cache)
+    assert ino(vo_b2.key, "frame_base") != ino(vt_c.key, "frame_base")
+    assert np.array_equal(vo_b2.frames["base"], vt_fresh.frames["base"])
+    w1 = load_windows(cfg, tmp_path / "demos", cache)
     # A temporary directory of a process that died is removed; an older version's cache file is refused.
-    from mani_skill_softvt.baselines import dataset as D
 
     dead = cache / f".{w3.key}.tmp-999999999"
     (dead / "frame_base.npy").parent.mkdir()

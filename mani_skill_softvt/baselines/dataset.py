@@ -33,6 +33,7 @@ version, so a package that reads or renders differently never reads an older ent
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import filecmp
 import hashlib
@@ -282,22 +283,39 @@ def link_shared_arrays(new: Path, cache: Path) -> int:
     actions: 7.6 of the 14.7 GB a VT entry of 1,000 Object-Soft demos holds. Two trainings at once
     then want one copy of them in the page cache, not two. Entries are only read once renamed into
     place, so a file two entries share is never written through; deleting one entry leaves the
-    other's whole. A filesystem without hard links keeps the copies."""
+    other's whole. The link is made first and its own bytes compared, so an entry deleted meanwhile
+    by another process costs only that file's sharing; a filesystem without hard links keeps the copies."""
     shared = 0
     for f in sorted(new.glob("*.npy")):
         size = f.stat().st_size
+        link = f.with_name(f".{f.name}.link")
         for other in sorted(p / f.name for p in cache.iterdir() if p.is_dir() and not p.name.startswith(".")):
-            if not other.is_file() or other.stat().st_size != size or not filecmp.cmp(f, other, shallow=False):
-                continue
-            link = f.with_name(f".{f.name}.link")
             try:
+                if other.stat().st_size != size:
+                    continue
                 os.link(other, link)
-            except OSError:
-                return shared
-            os.replace(link, f)
-            shared += size
-            break
+            except FileNotFoundError:  # another process removed that entry
+                continue
+            except OSError as e:
+                if e.errno in (errno.EPERM, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK, errno.ENOSYS):
+                    return shared  # no hard links here
+                raise
+            if filecmp.cmp(f, link, shallow=False):  # the inode now linked, not a path that may change
+                os.replace(link, f)
+                shared += size
+                break
+            link.unlink()
     return shared
+
+
+def cache_size_gb(entries: list[Path]) -> float:
+    """The disk the ``.npy`` files of ``entries`` take, a file shared by several entries counted once."""
+    files = {}
+    for p in entries:
+        for f in p.glob("*.npy"):
+            st = f.stat()
+            files[(st.st_dev, st.st_ino)] = st.st_size
+    return sum(files.values()) / 2 ** 30
 
 
 def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: bool = False) -> DemoWindows:
@@ -332,7 +350,7 @@ def load_windows(cfg: DPConfig, demos_root: Path, cache: Path | None, heldout: b
                 shutil.rmtree(stale)
         others = [p for p in cache.iterdir() if p.is_dir() and not p.name.startswith(".") and p != entry]
         if others:  # superseded entries (a grown demo set, another split) pile up: say so once per preparation
-            size = sum(f.stat().st_size for p in others for f in p.glob("*.npy")) / 2 ** 30
+            size = cache_size_gb(others)
             print(f"preparing {entry}; {len(others)} other entries in {cache} take {size:.1f} GB (each one's meta.json "
                   "says what it holds; delete those no run reads)", file=sys.stderr, flush=True)
         tmp = cache / f".{key}.tmp-{os.getpid()}"
