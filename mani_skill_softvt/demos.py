@@ -89,12 +89,22 @@ def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], di
     return problems, ep
 
 
+def accepted_demos_expected(demo_set: DemoSet, task_id: int, num: int, accepted: int) -> int:
+    """The accepted demos a task holds once ``generate(..., accepted=accepted)`` has run: as many as
+    asked for, or more where its QC log lists more among its first ``num`` seeds (a set is never
+    shrunk, and a fresh checkout records every one its committed log lists again). The progress
+    bar's total, so that re-recording a committed set shows its true length and time left."""
+    qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
+    listed = sum(bool(qc.get(train_seed(task_id, i), {}).get("accepted")) for i in range(num))
+    return max(accepted, listed)
+
+
 def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out: Path, planner: str,
                    control_mode: str, queue) -> dict:
     """Record one task's demos: the first ``num`` training seeds, or with ``accepted`` training seeds
     in order until that many are accepted (at most ``num`` seeds), keeping every seed generated
     before (a smaller ``accepted`` never shrinks the set, nor its renderings). The progress queue
-    gets one per seed, or with ``accepted`` one per accepted demo (at most ``accepted``)."""
+    gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before)."""
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     seeds, kept = [], 0
@@ -117,7 +127,7 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
             append_jsonl(demo_set.qc_log(task_id), line)
             qc[seed] = line
         kept += bool(qc[seed]["accepted"])
-        if accepted is None or (qc[seed]["accepted"] and kept <= accepted):
+        if accepted is None or qc[seed]["accepted"]:  # one per accepted demo held (accepted_demos_expected)
             queue.put(1)
     if env is not None:
         env.close()
@@ -183,7 +193,8 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
     # Written first (a resumed run checks its physics), and again with the seeds actually drawn.
     _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None if accepted else num)
-    bar = tqdm(total=len(tasks) * (accepted or num), desc=f"demos {suite}", unit="accepted demo" if accepted else "seed")
+    total = sum(accepted_demos_expected(demo_set, t, num, accepted) for t in tasks) if accepted else len(tasks) * num
+    bar = tqdm(total=total, desc=f"demos {suite}", unit="accepted demo" if accepted else "seed")
     results = []
     out_abs = Path(out).resolve()  # workers (Ray's above all) need not share our working directory
     for kind, value in run_tasks(_generate_task, [(suite, t, num, accepted, out_abs, planner, control_mode) for t in tasks],

@@ -87,7 +87,7 @@ def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_
     (logged) is skipped, the next seed is drawn, and drawing stops at the count asked."""
     from mani_skill_softvt.data.demo_set import DemoSet
     from mani_skill_softvt.data.seeds import train_seed
-    from mani_skill_softvt.demos import main
+    from mani_skill_softvt.demos import accepted_demos_expected, main
     from mani_skill_softvt.fileio import append_jsonl
 
     demo_set = DemoSet(tmp_path, "object_rigid")
@@ -103,6 +103,8 @@ def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_
     assert manifest["train_seeds"]["3"] == [first, first + 1]
     with h5py.File(demo_set.trajectory(3), "r") as f:
         assert list(f.keys()) == ["traj_0"] and f["traj_0"].attrs["seed"] == first + 1
+    # The progress bar's total: the demos asked for, or the accepted ones the log lists if more.
+    assert accepted_demos_expected(demo_set, 3, 3, 1) == 1 and accepted_demos_expected(demo_set, 3, 3, 3) == 3
     # Seeds generated before are kept: asking for fewer never shrinks the set (nor its renderings).
     append_jsonl(demo_set.qc_log(3), {**demo_set.verdicts(3)[1], "seed": first + 2})  # as if generated
     import shutil
@@ -110,6 +112,7 @@ def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_
     shutil.copy(demo_set.episode_file(3, first + 1), demo_set.episode_file(3, first + 2))
     shutil.copy(demo_set.episode_file(3, first + 1).with_suffix(".json"),
                 demo_set.episode_file(3, first + 2).with_suffix(".json"))
+    assert accepted_demos_expected(demo_set, 3, 3, 1) == 2  # the log lists two: both are held, both counted
     (row,) = generate("object_rigid", [3], 3, tmp_path, accepted=1)["tasks"]
     assert (row["generated"], row["accepted"]) == (3, 2) and len(demo_set.verdicts(3)) == 3
     with pytest.raises(SystemExit):
