@@ -107,7 +107,7 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before)."""
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
-    seeds, kept = [], 0
+    seeds, kept, recorded = [], 0, False
     env = None
     for i in range(num):
         seed = train_seed(task_id, i)
@@ -126,22 +126,39 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
             line["wall_s"] = round(time.perf_counter() - t0, 2)
             append_jsonl(demo_set.qc_log(task_id), line)
             qc[seed] = line
+            recorded = True
         kept += bool(qc[seed]["accepted"])
         if accepted is None or qc[seed]["accepted"]:  # one per accepted demo held (accepted_demos_expected)
             queue.put(1)
     if env is not None:
         env.close()
-    return _merge_task(suite, task_id, seeds, out)
+    return _merge_task(suite, task_id, seeds, out, recorded)
 
 
-def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path) -> dict:
+def merged_is_current(final_h5: Path, final_json: Path, episode_files: list[Path]) -> bool:
+    """Whether a task's merged trajectory already packs exactly these episode files: both halves
+    exist, the json lists as many episodes, and it was written after every one of them (a file
+    recorded again since is newer, and the task is merged again)."""
+    if not (final_h5.exists() and final_json.exists()):
+        return False
+    try:
+        listed = len(read_json(final_json)["episodes"])
+    except (ValueError, KeyError, TypeError):
+        return False
+    merged_at = min(final_h5.stat().st_mtime_ns, final_json.stat().st_mtime_ns)
+    return listed == len(episode_files) and all(p.stat().st_mtime_ns <= merged_at for p in episode_files)
+
+
+def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path, recorded: bool = True) -> dict:
     """Pack the task's accepted episodes into ``task<k>.h5`` + ``.json`` with ManiSkill's
-    ``merge_trajectories`` (written under temporary names, then renamed)."""
+    ``merge_trajectories`` (written under temporary names, then renamed). A call that recorded
+    nothing keeps a merged file that is current (a resumed campaign's rounds over a finished set
+    would otherwise rewrite 1,000 episodes ten times, about a minute a round)."""
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
-    if accepted:
-        final_h5, final_json = episode_paths(demo_set.trajectory(task_id))
+    final_h5, final_json = episode_paths(demo_set.trajectory(task_id))
+    if accepted and (recorded or not merged_is_current(final_h5, final_json, accepted)):
         tmp_h5, tmp_json = episode_paths(final_h5.with_name(f"{final_h5.stem}.partial.h5"))
         with quiet_maniskill_logger():  # it logs every file it merges; the command prints its own progress
             merge_trajectories(str(tmp_h5), [str(p) for p in accepted])

@@ -41,6 +41,20 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
     assert manifest["physics"] == physics_signature()
 
 
+def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_is_merged_again(dataset):
+    import os
+
+    out, _ = dataset
+    merged = out / "object_soft" / "task3.h5"
+    episode = next((out / "object_soft" / "task3").glob("ep_*.h5"))
+    before = merged.stat().st_mtime_ns, merged.read_bytes()
+    generate("object_soft", [3], 1, out)  # every seed recorded: nothing new, nothing merged
+    assert merged.stat().st_mtime_ns == before[0]
+    os.utime(episode, ns=(before[0] + 10**9, before[0] + 10**9))  # as if recorded again after the merge
+    generate("object_soft", [3], 1, out)
+    assert merged.stat().st_mtime_ns > before[0] and merged.read_bytes() == before[1]
+
+
 def test_resuming_demos_recorded_under_other_physics_is_refused(dataset, tmp_path):
     out, _ = dataset
     manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
