@@ -17,3 +17,17 @@ def soft_cube_expert_run(tmp_path_factory):
     eps = episodes("object_soft", "id", tasks=[3], per_task=1)
     path = tmp_path_factory.mktemp("expert_run") / "full.jsonl"
     return eps, evaluate(RunConfig.resolve("expert"), path, eps), path
+
+
+# README's test command runs two pytest-xdist workers (--dist loadgroup). Each module stays on one
+# worker, so its module-scoped envs are built once; the modules that share the session's expert run
+# (above) go together, so it is run once.
+SHARES_EXPERT_RUN = {"test_evaluation_runner", "test_planner", "test_ray"}
+
+
+def pytest_collection_modifyitems(config, items):
+    if not config.pluginmanager.hasplugin("xdist"):
+        return
+    for item in items:
+        module = item.module.__name__.rpartition(".")[2]
+        item.add_marker(pytest.mark.xdist_group("expert_run" if module in SHARES_EXPERT_RUN else module))
