@@ -330,7 +330,8 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     cameras, the tactile images (whose shear tracking follows the episode) and the actions share
     one timeline with no resampling; the file is written by
     :func:`~mani_skill_softvt.data.trajectory.write_rendering`, which keeps the episodes an earlier
-    ``out_h5`` already holds. The states are restored, not re-simulated (ManiSkill's
+    ``out_h5`` already holds and, rendering ten episodes to a part file, those of a run killed
+    mid-task. The states are restored, not re-simulated (ManiSkill's
     ``replay_trajectory --use-env-states`` steps the physics before each restore). Returns the
     episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """

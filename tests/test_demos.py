@@ -331,6 +331,37 @@ def test_a_grown_demo_set_renders_only_its_new_episodes(tmp_path):
     assert write_rendering(traj, out, "state", observe, needed=("tactile/left/depth",)) == (3, 3)
 
 
+def test_a_rendering_killed_mid_task_keeps_its_finished_parts_and_resumes_to_the_same_file(tmp_path):
+    from mani_skill_softvt.data.trajectory import rendering_parts_dir, write_rendering
+
+    traj = tmp_path / "task0.h5"
+    _stored_episodes(traj, [(5, 2), (6, 3), (7, 3), (8, 4), (9, 2)])
+    calls, kill_at = [], [8]
+
+    def observe(seed, states):
+        calls.append(seed)
+        if seed in kill_at:
+            raise KeyboardInterrupt  # the session ends while the second part renders
+        return [{"agent/qpos": row[:9] * 2} for row in states["actors/cube"]]
+
+    out = tmp_path / "task0_state.h5"
+    with pytest.raises(KeyboardInterrupt):
+        write_rendering(traj, out, "state", observe, part_episodes=2)
+    parts = rendering_parts_dir(out)
+    assert not out.exists() and [p.name for p in parts.iterdir()] == ["part_0000.h5"]  # seeds 5 and 6
+    kill_at.clear()
+    assert write_rendering(traj, out, "state", observe, part_episodes=2) == (5, 3) and calls == [5, 6, 7, 8, 7, 8, 9]
+    assert not parts.exists()
+    whole = tmp_path / "whole_state.h5"
+    assert write_rendering(traj, whole, "state", observe) == (5, 5)
+    with h5py.File(out, "r") as a, h5py.File(whole, "r") as b:
+        assert list(a.keys()) == list(b.keys()) == [f"traj_{i}" for i in range(5)]
+        for k in a:
+            assert dict(a[k].attrs) == dict(b[k].attrs)
+            assert np.array_equal(a[k]["obs/agent/qpos"][()], b[k]["obs/agent/qpos"][()])
+            assert np.array_equal(a[k]["actions"][()], b[k]["actions"][()])
+
+
 def test_the_committed_samples_were_recorded_under_the_current_physics():
     from mani_skill_softvt.paths import REPO_DIR
     from mani_skill_softvt.physics.constants import physics_signature

@@ -184,9 +184,19 @@ def rendering_current(rendered_group, digest: str, needed: tuple[str, ...] = (),
             and (tactile_model is None or tactile_model_of(rendered_group) == tactile_model))
 
 
+RENDER_PART_EPISODES = 10  # episodes per part file: what a rendering killed mid-task can lose
+
+
+def rendering_parts_dir(out_h5: Path) -> Path:
+    """Where a rendering under way keeps its finished parts (``<name>.parts/`` beside ``out_h5``:
+    not an ``.h5``, so no trajectory glob of the demo store picks it up)."""
+    out_h5 = Path(out_h5)
+    return out_h5.with_name(f"{out_h5.stem}.parts")
+
+
 def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_episode,
                     sensor_configs: dict | None = None, needed: tuple[str, ...] = (), progress=None,
-                    tactile_model: int | None = None) -> tuple[int, int]:
+                    tactile_model: int | None = None, part_episodes: int = RENDER_PART_EPISODES) -> tuple[int, int]:
     """Write the re-rendering of stored episodes into ``obs_mode`` observations; return how many
     episodes it holds and how many were rendered now.
 
@@ -199,39 +209,71 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
     ``sensor_configs`` the env rendered with in its env kwargs, so ManiSkill's tools rebuild the
     same cameras). An episode that a previous ``out_h5`` already holds as current
     (:func:`rendering_current` with ``needed``) is copied from it, not rendered again: a demo set
-    that grew renders only its new episodes. Written atomically; the source is checked first.
+    that grew renders only its new episodes.
+
+    Episodes are rendered ``part_episodes`` at a time into part files
+    (:func:`rendering_parts_dir`), each written atomically, and packed into ``out_h5`` (atomically)
+    when all are there; the parts are then removed. A rendering killed mid-task (a session's end)
+    keeps its finished parts, and the next run copies them like a previous ``out_h5``'s episodes:
+    it loses at most one part's work, not the task's. The source is checked first.
     ``progress(1)`` is called per episode.
     """
     problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
     if problem:
         raise CorruptDataError(problem)
-    n = rendered = 0
+    if part_episodes < 1:
+        raise ValueError(f"part_episodes must be >= 1, got {part_episodes}")
+    parts_dir = rendering_parts_dir(out_h5)
+    parts = sorted(parts_dir.glob("part_*.h5")) if parts_dir.is_dir() else []
+    sources = [f for f in (_open_previous(p) for p in [Path(out_h5), *parts]) if f is not None]
+    rendered = 0
+    try:
+        held = {}  # an episode digest -> a current rendering of it, in out_h5 or a part
+        for f in sources:
+            for k in f:
+                digest = f[k].attrs.get("states_sha256")
+                if digest not in held and rendering_current(f[k], digest, needed, tactile_model):
+                    held[digest] = f[k]
+        with h5py.File(trajectory_h5, "r") as src:
+            names = sorted(src.keys(), key=lambda k: int(k.split("_")[1]))
+            digests = {name: episode_digest(src[name]) for name in names}
+            todo = [name for name in names if digests[name] not in held]
+            for _ in range(len(names) - len(todo)):
+                if progress is not None:
+                    progress(1)
+            index = 1 + max((int(p.stem.split("_")[1]) for p in parts), default=-1)
+            for start in range(0, len(todo), part_episodes):
+                chunk = todo[start:start + part_episodes]
 
-    def write(tmp: Path):
-        nonlocal n, rendered
-        previous = _open_previous(out_h5)
-        try:
-            old = {} if previous is None else {previous[k].attrs.get("states_sha256"): k for k in previous}
-            with h5py.File(trajectory_h5, "r") as src, h5py.File(tmp, "w") as dst:
-                for name in sorted(src.keys(), key=lambda k: int(k.split("_")[1])):
-                    g = src[name]
-                    digest = episode_digest(g)
-                    if digest in old and rendering_current(previous[old[digest]], digest, needed, tactile_model):
-                        previous.copy(previous[old[digest]], dst, name=name)  # raw chunks: no re-compression
-                        dst[name].attrs.update(dict(g.attrs))
-                    else:
-                        _render_episode(trajectory_h5, name, g, dst, obs_mode, observe_episode, tactile_model)
-                        dst[name].attrs["states_sha256"] = digest
-                        dst[name].attrs["render_version"] = RENDER_VERSION
-                        rendered += 1
-                    n += 1
-                    if progress is not None:
-                        progress(1)
-        finally:
-            if previous is not None:
-                previous.close()
+                def write_part(tmp: Path, chunk=chunk):
+                    with h5py.File(tmp, "w") as dst:
+                        for name in chunk:
+                            _render_episode(trajectory_h5, name, src[name], dst, obs_mode, observe_episode,
+                                            tactile_model)
+                            dst[name].attrs["states_sha256"] = digests[name]
+                            dst[name].attrs["render_version"] = RENDER_VERSION
+                            if progress is not None:
+                                progress(1)
 
-    atomic_write(out_h5, write)
+                part = parts_dir / f"part_{index:04d}.h5"
+                atomic_write(part, write_part)
+                index += 1
+                sources.append(h5py.File(part, "r"))
+                held.update({digests[name]: sources[-1][name] for name in chunk})
+                rendered += len(chunk)
+
+            def write(tmp: Path):
+                with h5py.File(tmp, "w") as dst:
+                    for name in names:
+                        group = held[digests[name]]
+                        group.file.copy(group, dst, name=name)  # raw chunks: no re-compression
+                        dst[name].attrs.update(dict(src[name].attrs))
+
+            atomic_write(out_h5, write)
+    finally:
+        for f in sources:
+            f.close()
+    shutil.rmtree(parts_dir, ignore_errors=True)
     meta_path = Path(trajectory_h5).with_suffix(".json")
     if meta_path.exists():  # the trajectory's json, for the rendered obs mode (ManiSkill pairs them by name)
         meta = read_json(meta_path)
@@ -240,12 +282,12 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
         if sensor_configs:
             env_kwargs["sensor_configs"] = {**env_kwargs.get("sensor_configs", {}), **sensor_configs}
         atomic_write_json(Path(out_h5).with_suffix(".json"), meta)
-    return n, rendered
+    return len(names), rendered
 
 
 def _open_previous(out_h5: Path):
-    """The rendering being replaced, open for reading; None if there is none or it is unreadable
-    (then every episode is rendered again)."""
+    """A rendering (or a part of one) to copy current episodes from, open for reading; None if
+    there is none or it is unreadable (then its episodes are rendered again)."""
     if not Path(out_h5).exists():
         return None
     try:
