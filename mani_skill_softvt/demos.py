@@ -22,6 +22,7 @@ import argparse
 import json
 import logging
 import os
+import shutil
 import time
 from collections import Counter
 from pathlib import Path
@@ -44,6 +45,7 @@ from .data.trajectory import (
     open_h5,
     read_episode,
     rendering_current,
+    rendering_parts_dir,
     screen,
     state_dict_at,
     write_rendering,
@@ -135,18 +137,20 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     return _merge_task(suite, task_id, seeds, out, recorded)
 
 
-def merged_is_current(final_h5: Path, final_json: Path, episode_files: list[Path]) -> bool:
-    """Whether a task's merged trajectory already packs exactly these episode files: both halves
-    exist, the json lists as many episodes, and it was written after every one of them (a file
-    recorded again since is newer, and the task is merged again)."""
-    if not (final_h5.exists() and final_json.exists()):
+def merged_is_current(final_h5: Path, final_json: Path, seeds: list[int], episode_files: list[Path]) -> bool:
+    """Whether a task's merged trajectory already packs exactly these episodes: its h5 opens, its
+    json lists the same seeds in the same order, and it was written after every episode file
+    changed (one recorded again since, or copied in, is newer: the task is merged again)."""
+    if not final_json.exists() or check_h5(final_h5, read=False) is not None:
         return False
     try:
-        listed = len(read_json(final_json)["episodes"])
+        listed = [int(e["episode_seed"]) for e in read_json(final_json)["episodes"]]
     except (ValueError, KeyError, TypeError):
         return False
     merged_at = min(final_h5.stat().st_mtime_ns, final_json.stat().st_mtime_ns)
-    return listed == len(episode_files) and all(p.stat().st_mtime_ns <= merged_at for p in episode_files)
+    changed = (max(s.st_mtime_ns, s.st_ctime_ns) for s in
+               (p.stat() for f in episode_files for p in (f, f.with_suffix(".json")) if p.exists()))
+    return listed == list(seeds) and all(t <= merged_at for t in changed)
 
 
 def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path, recorded: bool = True) -> dict:
@@ -156,9 +160,10 @@ def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path, recorded:
     would otherwise rewrite 1,000 episodes ten times, about a minute a round)."""
     demo_set = DemoSet(out, suite)
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
-    accepted = [demo_set.episode_file(task_id, s) for s in seeds if qc.get(s, {}).get("accepted")]
+    accepted_seeds = [s for s in seeds if qc.get(s, {}).get("accepted")]
+    accepted = [demo_set.episode_file(task_id, s) for s in accepted_seeds]
     final_h5, final_json = episode_paths(demo_set.trajectory(task_id))
-    if accepted and (recorded or not merged_is_current(final_h5, final_json, accepted)):
+    if accepted and (recorded or not merged_is_current(final_h5, final_json, accepted_seeds, accepted)):
         tmp_h5, tmp_json = episode_paths(final_h5.with_name(f"{final_h5.stem}.partial.h5"))
         with quiet_maniskill_logger():  # it logs every file it merges; the command prints its own progress
             merge_trajectories(str(tmp_h5), [str(p) for p in accepted])
@@ -486,6 +491,7 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
         elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
                                   get_suite(args.suite).frames_tactile_model(args.obs_mode)):
             print(f"task {t}: already rendered (delete {dst.name} to redo it)")
+            shutil.rmtree(rendering_parts_dir(dst), ignore_errors=True)  # a run killed after its last pack
         else:
             todo.append((args.suite, t, str(args.out), args.obs_mode, camera_size))
 

@@ -19,15 +19,21 @@ def soft_cube_expert_run(tmp_path_factory):
     return eps, evaluate(RunConfig.resolve("expert"), path, eps), path
 
 
-# README's test command runs two pytest-xdist workers (--dist loadgroup). Each module stays on one
-# worker, so its module-scoped envs are built once; the modules that share the session's expert run
-# (above) go together, so it is run once.
+# README's test command runs two pytest-xdist workers. Each module stays on one worker, so its
+# module-scoped envs are built once, and the modules that share the session's expert run (above) go
+# together, so it runs once. A scheduler, not xdist_group marks: xdist 3.8 reads those before a
+# conftest's collection hook runs, and under pytest 9 it cannot rename the node ids it groups by
+# (pytest-xdist issue 1386).
 SHARES_EXPERT_RUN = {"test_evaluation_runner", "test_planner", "test_ray"}
 
 
-def pytest_collection_modifyitems(config, items):
-    if not config.pluginmanager.hasplugin("xdist"):
-        return
-    for item in items:
-        module = item.module.__name__.rpartition(".")[2]
-        item.add_marker(pytest.mark.xdist_group("expert_run" if module in SHARES_EXPERT_RUN else module))
+@pytest.hookimpl(optionalhook=True)  # the hook exists only where xdist is installed
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            module = nodeid.split("::", 1)[0].rpartition("/")[2].removesuffix(".py")
+            return "expert_run" if module in SHARES_EXPERT_RUN else module
+
+    return ModuleScheduling(config, log)

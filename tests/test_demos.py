@@ -53,6 +53,11 @@ def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_
     os.utime(episode, ns=(before[0] + 10**9, before[0] + 10**9))  # as if recorded again after the merge
     generate("object_soft", [3], 1, out)
     assert merged.stat().st_mtime_ns > before[0] and merged.read_bytes() == before[1]
+    from mani_skill_softvt.demos import merged_is_current
+
+    seed = json.loads(merged.with_suffix(".json").read_text())["episodes"][0]["episode_seed"]
+    assert merged_is_current(merged, merged.with_suffix(".json"), [seed], [episode])
+    assert not merged_is_current(merged, merged.with_suffix(".json"), [seed + 1], [episode])  # another episode
 
 
 def test_resuming_demos_recorded_under_other_physics_is_refused(dataset, tmp_path):
@@ -349,6 +354,7 @@ def test_a_rendering_killed_mid_task_keeps_its_finished_parts_and_resumes_to_the
         write_rendering(traj, out, "state", observe, part_episodes=2)
     parts = rendering_parts_dir(out)
     assert not out.exists() and [p.name for p in parts.iterdir()] == ["part_0000.h5"]  # seeds 5 and 6
+    (parts / "part_0003.h5").write_bytes(b"torn")  # an unreadable part is rendered again, not trusted
     kill_at.clear()
     assert write_rendering(traj, out, "state", observe, part_episodes=2) == (5, 3) and calls == [5, 6, 7, 8, 7, 8, 9]
     assert not parts.exists()

@@ -9,6 +9,8 @@
     <root>/<suite>/task<k>.h5 / .json          accepted episodes in ManiSkill's trajectory format
     <root>/<suite>/task<k>_<obs_mode>.h5       the same episodes re-rendered into observations
     <root>/<suite>/task<k>_<obs_mode>_<H>x<W>.h5   ... with the cameras rendered at H x W (not 224 x 224)
+    <root>/<suite>/task<k>_<obs_mode>[_<H>x<W>].parts/part_<j>.h5   a rendering under way, ten episodes a part
+                                               (removed when the task's file is written)
     <root>/<suite>/qc_report.json, stats.json, r_max_hist.png
 
 Generation (:mod:`mani_skill_softvt.demos`), rendering, the LeRobot export and the statistics

@@ -215,7 +215,8 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
     (:func:`rendering_parts_dir`), each written atomically, and packed into ``out_h5`` (atomically)
     when all are there; the parts are then removed. A rendering killed mid-task (a session's end)
     keeps its finished parts, and the next run copies them like a previous ``out_h5``'s episodes:
-    it loses at most one part's work, not the task's. The source is checked first.
+    it loses at most one part's work, not the task's. Two runs must not render one ``out_h5`` at
+    once (each would remove the other's parts). The source is checked first.
     ``progress(1)`` is called per episode.
     """
     problem = check_h5(trajectory_h5)  # small (states only): read it all before rendering anything
