@@ -249,9 +249,41 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
         "note": "training and evaluation seed ranges are disjoint by construction"})
 
 
+def rerecord_agreement(qc_lines: list[dict]) -> dict:
+    """How the episodes a QC log holds twice agree with their first verdict. A fresh checkout
+    records again the accepted seeds its committed log lists (another machine, as a rule), and
+    appends the new verdict: on another machine the same episode keeps its outcome but not its
+    bits. Counts the seeds recorded again, those with the first verdict and step count, those
+    whose R_max is the same bit for bit, and the largest R_max difference with its seed."""
+    first, agree = {}, {"rerecorded": 0, "same_verdict": 0, "same_steps": 0, "r_max_equal": 0,
+                        "r_max_largest_difference": 0.0, "r_max_largest_difference_seed": None}
+    for line in qc_lines:
+        then = first.setdefault(line["seed"], line)
+        if then is line:
+            continue
+        agree["rerecorded"] += 1
+        agree["same_verdict"] += line["accepted"] == then["accepted"]
+        agree["same_steps"] += line["steps"] == then["steps"]
+        if line.get("r_max") is not None and then.get("r_max") is not None:
+            difference = abs(line["r_max"] - then["r_max"])
+            agree["r_max_equal"] += difference == 0.0
+            if difference > agree["r_max_largest_difference"]:
+                agree["r_max_largest_difference"], agree["r_max_largest_difference_seed"] = difference, line["seed"]
+    return agree
+
+
+def _pooled_agreement(rows: list[dict]) -> dict:
+    """:func:`rerecord_agreement` over every task: the counts summed, the largest difference kept."""
+    pooled = {k: sum(r["rerecorded"][k] for r in rows) for k in ("rerecorded", "same_verdict", "same_steps", "r_max_equal")}
+    worst = max(rows, key=lambda r: r["rerecorded"]["r_max_largest_difference"])["rerecorded"]
+    return {**pooled, "r_max_largest_difference": worst["r_max_largest_difference"],
+            "r_max_largest_difference_seed": worst["r_max_largest_difference_seed"]}
+
+
 def stats(suite: str, out: Path) -> dict:
     """Per task: expert success (accepted / generated), R_max median and 95th percentile, episode
-    lengths, wall seconds per demo, rejection reasons. Writes ``stats.json`` and ``r_max_hist.png``
+    lengths, wall seconds per demo, rejection reasons, and how episodes recorded again agree with
+    their first verdict (:func:`rerecord_agreement`). Writes ``stats.json`` and ``r_max_hist.png``
     next to the suite's demos; raises FileNotFoundError when there are none."""
     demo_set = DemoSet(out, suite)
     rows, all_r, corrupt = [], [], []
@@ -269,13 +301,14 @@ def stats(suite: str, out: Path) -> dict:
                      **_r_max_summary(r),
                      "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
                      "seconds_per_demo": float(np.mean(walls)) if walls else None,
-                     "rejected": dict(Counter(p for q in qc for p in q.get("problems", [])))})
+                     "rejected": dict(Counter(p for q in qc for p in q.get("problems", []))),
+                     "rerecorded": rerecord_agreement(demo_set.read_qc(t))})
     if not rows:
         raise FileNotFoundError(f"no demos of suite '{suite}' under {out}; run "
                                 f"'python -m mani_skill_softvt.demos generate --suite {suite} --out {out}' first")
     summary = {"suite": suite, "tasks": rows,
                "generated": sum(r["generated"] for r in rows), "accepted": sum(r["accepted"] for r in rows),
-               **_r_max_summary(all_r), "unreadable_files": corrupt}
+               **_r_max_summary(all_r), "rerecorded": _pooled_agreement(rows), "unreadable_files": corrupt}
     atomic_write_json(demo_set.stats, summary)
     if all_r:
         fig = Figure(figsize=(5, 3))
@@ -322,6 +355,12 @@ def format_stats(summary: dict) -> str:
     lines.append("-" * len(head))
     lines.append(f"{'all':>4}  {summary['accepted']:>4}/{summary['generated']:<4}  {num(summary['r_max_median'], '9.3f')}  "
                  f"{num(summary['r_max_p95'], '9.3f')}  {summary['r_max_above_1']:>3}")
+    again = summary.get("rerecorded") or {}
+    if again.get("rerecorded"):
+        n = again["rerecorded"]
+        lines.append(f"recorded again: {n}; first verdict kept {again['same_verdict']}/{n}, step count "
+                     f"{again['same_steps']}/{n}, R_max the same bits {again['r_max_equal']}/{n}, largest R_max "
+                     f"difference {again['r_max_largest_difference']:.2g} (seed {again['r_max_largest_difference_seed']})")
     return "\n".join(lines)
 
 

@@ -190,6 +190,21 @@ def test_stats(dataset, tmp_path):
         stats("object_soft", tmp_path)
 
 
+def test_episodes_recorded_again_are_compared_with_their_first_verdict():
+    from mani_skill_softvt.demos import rerecord_agreement
+
+    def line(seed, accepted=True, steps=150, r_max=0.5):
+        return {"seed": seed, "accepted": accepted, "steps": steps, "r_max": r_max, "problems": []}
+
+    log = [line(1), line(2, r_max=0.25), line(3, accepted=False, steps=300), line(4),  # the committed log
+           line(1), line(2, r_max=0.25 + 2**-40), line(4, steps=151, r_max=0.7),      # this machine's
+           line(1, r_max=0.5 + 1e-3)]                                                   # a third machine's
+    assert rerecord_agreement(log) == {"rerecorded": 4, "same_verdict": 4, "same_steps": 3, "r_max_equal": 1,
+                                       "r_max_largest_difference": pytest.approx(0.2),
+                                       "r_max_largest_difference_seed": 4}
+    assert rerecord_agreement(log[:4])["rerecorded"] == 0
+
+
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
     from mani_skill_softvt.demos import render_observations
 
