@@ -36,7 +36,16 @@ sync_back() {
       -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
 }
 trap sync_back EXIT
-for ((n = ROUND; n < NUM + ROUND; n += ROUND)); do
+# Rounds the store holds already (every task with that many accepted demos on disk) are not run
+# again: each re-reads every episode (stats, the rendering check), one to two minutes a round.
+held=$("$PY" -c 'import sys
+from mani_skill_softvt.data.demo_set import DemoSet
+from mani_skill_softvt.tasks.suites import NUM_TASKS
+demos = DemoSet(sys.argv[1], sys.argv[2])
+print(min(demos.accepted_on_disk(t) for t in range(NUM_TASKS)))' "$SOFTVT_DEMOS_DIR" "$SUITE")
+first=$(( held >= NUM ? NUM : (held >= ROUND ? held / ROUND * ROUND : ROUND) ))
+(( first == ROUND )) || echo "every task holds $held accepted demos: from the round of $first"
+for ((n = first; n < NUM + ROUND; n += ROUND)); do
   k=$(( n < NUM ? n : NUM ))
   "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
     --out "$SOFTVT_DEMOS_DIR"

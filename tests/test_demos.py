@@ -50,6 +50,9 @@ def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_
     before = merged.stat().st_mtime_ns, merged.read_bytes()
     generate("object_soft", [3], 1, out)  # every seed recorded: nothing new, nothing merged
     assert merged.stat().st_mtime_ns == before[0]
+    from mani_skill_softvt.data.demo_set import DemoSet
+
+    assert DemoSet(out, "object_soft").accepted_on_disk(3) == 1 and DemoSet(out, "object_soft").accepted_on_disk(2) == 0
     os.utime(episode, ns=(before[0] + 10**9, before[0] + 10**9))  # as if recorded again after the merge
     generate("object_soft", [3], 1, out)
     assert merged.stat().st_mtime_ns > before[0] and merged.read_bytes() == before[1]
