@@ -253,15 +253,15 @@ def rerecord_agreement(qc_lines: list[dict]) -> dict:
     """How the episodes a QC log holds twice agree with their first verdict. A fresh checkout
     records again the accepted seeds its committed log lists (another machine, as a rule), and
     appends the new verdict: on another machine the same episode keeps its outcome but not its
-    bits. Counts the seeds recorded again, those with the first verdict and step count, those
-    whose R_max is the same bit for bit, and the largest R_max difference with its seed."""
-    first, agree = {}, {"rerecorded": 0, "same_verdict": 0, "same_steps": 0, "r_max_equal": 0,
+    bits. Counts the repeats, those with the first verdict and step count, those whose R_max is the
+    same bit for bit, and the largest R_max difference with its seed (None if every one is the same)."""
+    first, agree = {}, {"repeats": 0, "same_verdict": 0, "same_steps": 0, "r_max_equal": 0,
                         "r_max_largest_difference": 0.0, "r_max_largest_difference_seed": None}
     for line in qc_lines:
         then = first.setdefault(line["seed"], line)
         if then is line:
             continue
-        agree["rerecorded"] += 1
+        agree["repeats"] += 1
         agree["same_verdict"] += line["accepted"] == then["accepted"]
         agree["same_steps"] += line["steps"] == then["steps"]
         if line.get("r_max") is not None and then.get("r_max") is not None:
@@ -274,7 +274,7 @@ def rerecord_agreement(qc_lines: list[dict]) -> dict:
 
 def _pooled_agreement(rows: list[dict]) -> dict:
     """:func:`rerecord_agreement` over every task: the counts summed, the largest difference kept."""
-    pooled = {k: sum(r["rerecorded"][k] for r in rows) for k in ("rerecorded", "same_verdict", "same_steps", "r_max_equal")}
+    pooled = {k: sum(r["rerecorded"][k] for r in rows) for k in ("repeats", "same_verdict", "same_steps", "r_max_equal")}
     worst = max(rows, key=lambda r: r["rerecorded"]["r_max_largest_difference"])["rerecorded"]
     return {**pooled, "r_max_largest_difference": worst["r_max_largest_difference"],
             "r_max_largest_difference_seed": worst["r_max_largest_difference_seed"]}
@@ -356,11 +356,12 @@ def format_stats(summary: dict) -> str:
     lines.append(f"{'all':>4}  {summary['accepted']:>4}/{summary['generated']:<4}  {num(summary['r_max_median'], '9.3f')}  "
                  f"{num(summary['r_max_p95'], '9.3f')}  {summary['r_max_above_1']:>3}")
     again = summary.get("rerecorded") or {}
-    if again.get("rerecorded"):
-        n = again["rerecorded"]
+    if again.get("repeats"):
+        n, seed = again["repeats"], again["r_max_largest_difference_seed"]
         lines.append(f"recorded again: {n}; first verdict kept {again['same_verdict']}/{n}, step count "
-                     f"{again['same_steps']}/{n}, R_max the same bits {again['r_max_equal']}/{n}, largest R_max "
-                     f"difference {again['r_max_largest_difference']:.2g} (seed {again['r_max_largest_difference_seed']})")
+                     f"{again['same_steps']}/{n}, R_max the same bits {again['r_max_equal']}/{n}"
+                     + ("" if seed is None else f", largest R_max difference "
+                        f"{again['r_max_largest_difference']:.2g} (seed {seed})"))
     return "\n".join(lines)
 
 

@@ -36,15 +36,20 @@ sync_back() {
       -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
 }
 trap sync_back EXIT
-# Rounds the store holds already (every task with that many accepted demos on disk) are not run
-# again: each re-reads every episode (stats, the rendering check), one to two minutes a round.
+# Rounds the QC logs hold already are not run: generate records every accepted seed a log lists
+# (again, where its file is missing) whatever round it is in, and each round re-reads every
+# episode (stats, the rendering check), one to two minutes. The first round run is the one above
+# the fewest accepted demos any task lists; a set already complete gets one round (it checks,
+# merges and renders what is missing).
 held=$("$PY" -c 'import sys
 from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.tasks.suites import NUM_TASKS
 demos = DemoSet(sys.argv[1], sys.argv[2])
-print(min(demos.accepted_on_disk(t) for t in range(NUM_TASKS)))' "$SOFTVT_DEMOS_DIR" "$SUITE")
-first=$(( held >= NUM ? NUM : (held >= ROUND ? held / ROUND * ROUND : ROUND) ))
-(( first == ROUND )) || echo "every task holds $held accepted demos: from the round of $first"
+print(min(demos.accepted_listed(t) for t in range(NUM_TASKS)))' "$SOFTVT_DEMOS_DIR" "$SUITE") || {
+  echo "could not count the accepted demos the QC logs under $SOFTVT_DEMOS_DIR/$SUITE list; every round runs" >&2
+  held=0; }
+first=$(( held >= NUM ? NUM : ((held / ROUND + 1) * ROUND < NUM ? (held / ROUND + 1) * ROUND : NUM) ))
+(( held == 0 )) || echo "the QC logs list at least $held accepted demos a task: from the round of $first"
 for ((n = first; n < NUM + ROUND; n += ROUND)); do
   k=$(( n < NUM ? n : NUM ))
   "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \

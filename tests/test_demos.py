@@ -52,7 +52,7 @@ def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_
     assert merged.stat().st_mtime_ns == before[0]
     from mani_skill_softvt.data.demo_set import DemoSet
 
-    assert DemoSet(out, "object_soft").accepted_on_disk(3) == 1 and DemoSet(out, "object_soft").accepted_on_disk(2) == 0
+    assert DemoSet(out, "object_soft").accepted_listed(3) == 1 and DemoSet(out, "object_soft").accepted_listed(2) == 0
     os.utime(episode, ns=(before[0] + 10**9, before[0] + 10**9))  # as if recorded again after the merge
     generate("object_soft", [3], 1, out)
     assert merged.stat().st_mtime_ns > before[0] and merged.read_bytes() == before[1]
@@ -101,6 +101,10 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
     assert len(demo_set.read_qc(3)) == 2
     summary = stats("object_rigid", tmp_path)  # one episode, however often it was logged
     assert (summary["generated"], summary["accepted"]) == (1, 1)
+    assert summary["rerecorded"] == {"repeats": 1, "same_verdict": 1, "same_steps": 1, "r_max_equal": 1,
+                                     "r_max_largest_difference": 0.0, "r_max_largest_difference_seed": None}
+    assert "recorded again: 1; first verdict kept 1/1, step count 1/1, R_max the same bits 1/1\n" in \
+        format_stats(summary) + "\n"
 
 
 @pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
@@ -202,10 +206,10 @@ def test_episodes_recorded_again_are_compared_with_their_first_verdict():
     log = [line(1), line(2, r_max=0.25), line(3, accepted=False, steps=300), line(4),  # the committed log
            line(1), line(2, r_max=0.25 + 2**-40), line(4, steps=151, r_max=0.7),      # this machine's
            line(1, r_max=0.5 + 1e-3)]                                                   # a third machine's
-    assert rerecord_agreement(log) == {"rerecorded": 4, "same_verdict": 4, "same_steps": 3, "r_max_equal": 1,
+    assert rerecord_agreement(log) == {"repeats": 4, "same_verdict": 4, "same_steps": 3, "r_max_equal": 1,
                                        "r_max_largest_difference": pytest.approx(0.2),
                                        "r_max_largest_difference_seed": 4}
-    assert rerecord_agreement(log[:4])["rerecorded"] == 0
+    assert rerecord_agreement(log[:4])["repeats"] == 0
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):

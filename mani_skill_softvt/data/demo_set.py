@@ -78,10 +78,10 @@ class DemoSet:
         appends a second line), in the order the seeds were first logged."""
         return list({r["seed"]: r for r in self.read_qc(task_id)}.values())
 
-    def accepted_on_disk(self, task_id: int) -> int:
-        """The task's accepted demos whose episode file is here (a fresh checkout's committed QC
-        log lists accepted seeds before they are recorded again)."""
-        return sum(bool(r["accepted"]) and self.episode_file(task_id, r["seed"]).exists() for r in self.verdicts(task_id))
+    def accepted_listed(self, task_id: int) -> int:
+        """The accepted seeds the task's QC log lists, their episode files here or not (generate
+        records a listed one again where its file is missing, whatever number it is asked for)."""
+        return sum(bool(r["accepted"]) for r in self.verdicts(task_id))
 
     def trajectory(self, task_id: int) -> Path:
         """The task's accepted episodes, ManiSkill trajectory file (its ``.json`` sits beside it)."""
