@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import shutil
 import time
@@ -265,11 +266,19 @@ def rerecord_agreement(qc_lines: list[dict]) -> dict:
         agree["same_verdict"] += line["accepted"] == then["accepted"]
         agree["same_steps"] += line["steps"] == then["steps"]
         if line.get("r_max") is not None and then.get("r_max") is not None:
-            difference = abs(line["r_max"] - then["r_max"])
+            difference = _r_max_difference(line["r_max"], then["r_max"])
             agree["r_max_equal"] += difference == 0.0
             if difference > agree["r_max_largest_difference"]:
                 agree["r_max_largest_difference"], agree["r_max_largest_difference_seed"] = difference, line["seed"]
     return agree
+
+
+def _r_max_difference(a: float, b: float) -> float:
+    """|a - b|, with two NaNs (a diverged episode, twice) the same and one NaN infinitely apart:
+    a NaN would otherwise count as neither equal nor largest."""
+    if math.isnan(a) or math.isnan(b):
+        return 0.0 if math.isnan(a) and math.isnan(b) else math.inf
+    return abs(a - b)
 
 
 def _pooled_agreement(rows: list[dict]) -> dict:

@@ -210,6 +210,10 @@ def test_episodes_recorded_again_are_compared_with_their_first_verdict():
                                        "r_max_largest_difference": pytest.approx(0.2),
                                        "r_max_largest_difference_seed": 4}
     assert rerecord_agreement(log[:4])["repeats"] == 0
+    nan = float("nan")  # a diverged episode: NaN twice is the same outcome, once is the largest difference
+    again = rerecord_agreement([line(5, r_max=nan), line(6), line(5, r_max=nan), line(6, r_max=nan)])
+    assert again["r_max_equal"] == 1 and again["r_max_largest_difference"] == float("inf")
+    assert again["r_max_largest_difference_seed"] == 6
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
