@@ -109,6 +109,12 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     before (a smaller ``accepted`` never shrinks the set, nor its renderings). The progress queue
     gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before)."""
     demo_set = DemoSet(out, suite)
+    with demo_set.task_lock(task_id):  # another run may hold it: its verdicts are read after it
+        return _generate_locked(demo_set, suite, task_id, num, accepted, out, planner, control_mode, queue)
+
+
+def _generate_locked(demo_set: DemoSet, suite: str, task_id: int, num: int, accepted: int | None, out: Path,
+                     planner: str, control_mode: str, queue) -> dict:
     qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     seeds, kept, recorded = [], 0, False
     env = None
@@ -229,25 +235,34 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     bar.close()
     _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None)
     report = {"suite": suite, "tasks": sorted(results, key=lambda r: r["task_id"])}
-    atomic_write_json(demo_set.qc_report, report)
+    with demo_set.suite_lock():  # the file keeps the rows of tasks another run reported
+        rows = {r["task_id"]: r for r in (read_json(demo_set.qc_report).get("tasks", [])
+                                          if demo_set.qc_report.exists() else [])}
+        rows.update({r["task_id"]: r for r in results})
+        atomic_write_json(demo_set.qc_report, {"suite": suite, "tasks": [rows[t] for t in sorted(rows)]})
     return report
 
 
 def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_mode: str, physics: dict,
                     num: int | None) -> None:
     """``manifest.json``: per task the training-seed range generated (from its QC log, or the first
-    ``num`` if more) and the ID evaluation range, which never overlap."""
+    ``num`` if more) and the ID evaluation range, which never overlap. Tasks an earlier manifest
+    lists stay listed (a run over some tasks, or another run's, never drops the others)."""
     def last_index(t: int) -> int:
         logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
         return max(logged + [(num or 0) - 1, 0])
 
     # Only ManiSkill's modes changed their gripper encoding: pd_ee_pose manifests stay as they were.
     gripper = {"gripper_action_version": GRIPPER_ACTION_VERSION} if normalized_gripper(control_mode) else {}
-    atomic_write_json(demo_set.manifest, {
-        "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, **gripper, "physics": physics,
-        "train_seeds": {t: [train_seed(t, 0), train_seed(t, last_index(t))] for t in tasks},
-        "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
-        "note": "training and evaluation seed ranges are disjoint by construction"})
+    with demo_set.suite_lock():
+        if demo_set.manifest.exists():
+            tasks = sorted(set(tasks) | {int(t) for t in read_json(demo_set.manifest).get("train_seeds", {})})
+        atomic_write_json(demo_set.manifest, {
+            "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, **gripper,
+            "physics": physics,
+            "train_seeds": {t: [train_seed(t, 0), train_seed(t, last_index(t))] for t in tasks},
+            "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
+            "note": "training and evaluation seed ranges are disjoint by construction"})
 
 
 def rerecord_agreement(qc_lines: list[dict]) -> dict:
@@ -415,8 +430,16 @@ def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size,
     """One task's rendering (a work item of :func:`~mani_skill_softvt.parallel.run_tasks`): the
     task, its episodes, how many were rendered now (the rest were current); one message per episode."""
     demo_set = DemoSet(Path(out), suite)
-    return task_id, *render_observations(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
-                                         suite, task_id, obs_mode, camera_size, progress=queue.put)
+    src, dst = demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size)
+    with demo_set.task_lock(task_id):
+        if rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(obs_mode, ()),
+                                get_suite(suite).frames_tactile_model(obs_mode)):  # by another run meanwhile
+            with open_h5(src) as f:
+                episodes = len(f.keys())
+            for _ in range(episodes):
+                queue.put(1)
+            return task_id, episodes, 0
+        return task_id, *render_observations(src, dst, suite, task_id, obs_mode, camera_size, progress=queue.put)
 
 
 def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = (),

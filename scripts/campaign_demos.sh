@@ -2,6 +2,7 @@
 # Expert demos for the baselines (docs/baselines.md), resumable across sessions: Object-Soft's
 # (the first campaign, step 1), or another suite's with SUITE=object_rigid (findings campaign, step 2).
 #   [SUITE=object_soft] bash scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
+#   HELP_FROM_LAST=1 ... : beside a run that holds the suite, record and render its tasks from the last down
 # Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
 # R_max histogram) are copied back into demos/$SUITE/ for the commit. On a machine without
@@ -36,6 +37,21 @@ sync_back() {
       -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
 }
 trap sync_back EXIT
+if [ -n "${HELP_FROM_LAST:-}" ]; then
+  # Another run holds the suite (the campaign's other lane, going from the first task): help it
+  # from the last task down, one task at a time. A process records, merges or renders a task only
+  # under that task's lock, so the two meet in the middle, each finding the other's tasks done.
+  tasks=$("$PY" -c 'from mani_skill_softvt.tasks.suites import NUM_TASKS; print(NUM_TASKS)')
+  for ((t = tasks - 1; t >= 0; t--)); do
+    "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --tasks "$t" --accepted "$NUM" --num "$MAX_SEEDS" \
+      --out "$SOFTVT_DEMOS_DIR"
+    if [ "${RENDER_SIZE:-84x84}" != none ]; then
+      "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --tasks "$t" --obs-mode rgb+tactile \
+        --camera-size "${RENDER_SIZE:-84x84}" --out "$SOFTVT_DEMOS_DIR"
+    fi
+  done
+  exit 0
+fi
 # Rounds the QC logs hold already are not run: generate records every accepted seed a log lists
 # (again, where its file is missing) whatever round it is in, and each round re-reads every
 # episode (stats, the rendering check), one to two minutes. The first round run is the one above

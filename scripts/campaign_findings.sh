@@ -11,8 +11,10 @@
 # to be copied into main and committed as each finishes. Stores stay outside the checkout
 # (SOFTVT_DEMOS_DIR, SOFTVT_RUNS_DIR): on a machine without them the demos are recorded again from
 # the committed QC logs and a training starts again from step 0 (a checkpoint is too large to commit).
-# The two lanes share the Object-Soft demo store: whichever lane needs it holds a lock while it
-# records or completes it, so the other waits rather than writing the same files. The Object-Rigid
+# The two lanes share the Object-Soft demo store: whichever lane needs it first holds the suite's
+# lock while it records and renders it from the first task; a lane that arrives meanwhile helps
+# from the last task down (each task is locked while a process records or renders it), then waits
+# for the lock and finds the set complete. The Object-Rigid
 # demos come first and take both cores (two recording, then two rendering processes: about 16 and
 # 60 min on a new machine, 2 min on a machine that holds them): the soft lane waits for them, so
 # VT-C's rigid training starts about an hour sooner than beside the soft recording, and the soft
@@ -43,9 +45,14 @@ rigid_demos() {  # 1,000 Object-Rigid demos rendered at 84 px, on both cores whi
   SUITE=object_rigid flock "$RIGID_DEMOS_LOCK" bash scripts/campaign_demos.sh 100 2
 }
 
-soft_demos() {  # 1,000 accepted Object-Soft demos rendered at 84 px; one lane at a time
-  step "Object-Soft demos (waits while the other lane records them)"
-  SUITE=object_soft flock "$SOFTVT_DEMOS_DIR/.object_soft.lock" bash scripts/campaign_demos.sh 100 1
+soft_demos() {  # 1,000 accepted Object-Soft demos rendered at 84 px
+  local lock=$SOFTVT_DEMOS_DIR/.object_soft.lock
+  if ! flock -n "$lock" true; then  # the other lane records them: help it from the last task down
+    step "Object-Soft demos: the other lane records them from the first task; this one helps from the last"
+    SUITE=object_soft HELP_FROM_LAST=1 bash scripts/campaign_demos.sh 100 1
+  fi
+  step "Object-Soft demos (waits while the other lane completes them)"
+  SUITE=object_soft flock "$lock" bash scripts/campaign_demos.sh 100 1
 }
 
 train_and_score() {  # SUITE VARIANT NAME [SET]: the recipe of the committed Object-Soft policies

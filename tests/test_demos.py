@@ -401,3 +401,77 @@ def test_the_committed_samples_were_recorded_under_the_current_physics():
     for suite in ("object_soft", "object_rigid"):
         manifest = json.loads((REPO_DIR / "demos" / "sample" / suite / "manifest.json").read_text())
         assert manifest["physics"] == physics_signature(), suite
+
+
+def test_two_runs_share_a_suites_tasks_through_its_task_locks(tmp_path):
+    """A run waits for a task another run holds (the campaign's two lanes, one from the first task
+    and one from the last) and goes on the moment it is free; other tasks are not held up."""
+    import threading
+
+    from mani_skill_softvt.data.demo_set import DemoSet
+
+    demo_set = DemoSet(tmp_path, "object_soft")
+    entered = {3: threading.Event(), 4: threading.Event()}
+
+    def take(task):
+        with demo_set.task_lock(task):
+            entered[task].set()
+
+    with demo_set.task_lock(3):
+        waiting = [threading.Thread(target=take, args=(t,)) for t in (3, 4)]
+        for t in waiting:
+            t.start()
+        assert entered[4].wait(5) and not entered[3].wait(0.3)
+    assert entered[3].wait(5)
+    for t in waiting:
+        t.join(5)
+
+
+def test_a_run_over_some_tasks_keeps_the_other_tasks_in_the_manifest_and_qc_report(dataset, tmp_path):
+    """Two runs over one suite, each over its own tasks, leave one manifest and one QC report
+    listing all of them, whichever wrote last; a run's returned report is its own tasks'."""
+    import shutil
+
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.seeds import train_seed
+    from mani_skill_softvt.fileio import append_jsonl, atomic_write_json, read_json
+
+    out, _ = dataset
+    shutil.copytree(out / "object_soft", tmp_path / "object_soft")
+    demo_set = DemoSet(tmp_path, "object_soft")
+    other = {"task_id": 7, "generated": 5, "accepted": 5}  # as the other run reported task 7
+    append_jsonl(demo_set.qc_log(7), {"seed": train_seed(7, 4), "accepted": True, "steps": 150, "r_max": 0.5})
+    atomic_write_json(demo_set.qc_report, {"suite": "object_soft", "tasks": [other]})
+    manifest = read_json(demo_set.manifest)
+    manifest["train_seeds"]["7"] = [train_seed(7, 0), train_seed(7, 4)]
+    atomic_write_json(demo_set.manifest, manifest)
+    report = generate("object_soft", [3], 1, tmp_path)  # task 3 is complete: nothing recorded
+    assert [r["task_id"] for r in report["tasks"]] == [3]
+    assert [r["task_id"] for r in read_json(demo_set.qc_report)["tasks"]] == [3, 7]
+    assert read_json(demo_set.qc_report)["tasks"][1] == other
+    manifest = read_json(demo_set.manifest)
+    assert manifest["train_seeds"]["7"] == [train_seed(7, 0), train_seed(7, 4)] and "3" in manifest["train_seeds"]
+    assert manifest["id_eval_seeds"].keys() == manifest["train_seeds"].keys()
+
+
+def test_a_task_another_run_rendered_meanwhile_is_not_rendered_again(tmp_path):
+    """The render command picks its tasks before it takes their locks: a task the other lane
+    rendered in between is found current under the lock and counted, not rendered (no env built)."""
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.trajectory import RENDER_VERSION, episode_digest
+    from mani_skill_softvt.demos import _render_task
+
+    demo_set = DemoSet(tmp_path, "object_soft")
+    demo_set.dir.mkdir(parents=True)
+    _stored_episodes(demo_set.trajectory(0), [(7, 3), (8, 4)])
+    with h5py.File(demo_set.trajectory(0), "r") as a, h5py.File(demo_set.rendered(0, "state_dict"), "w") as b:
+        for k in a:
+            g = b.create_group(f"{k}/obs").parent
+            g.attrs.update({"states_sha256": episode_digest(a[k]), "render_version": RENDER_VERSION})
+    progress = []
+
+    class Queue:
+        put = progress.append
+
+    assert _render_task("object_soft", 0, str(tmp_path), "state_dict", None, Queue) == (0, 2, 0)
+    assert progress == [1, 1]

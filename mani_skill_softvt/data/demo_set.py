@@ -12,6 +12,8 @@
     <root>/<suite>/task<k>_<obs_mode>[_<H>x<W>].parts/part_<j>.h5   a rendering under way, ten episodes a part
                                                (removed when the task's file is written)
     <root>/<suite>/qc_report.json, stats.json, r_max_hist.png
+    <root>/<suite>/.task<k>.lock               held while a process records, merges or renders task k
+    <root>/<suite>/.suite.lock                 held while a process rewrites the manifest or the QC report
 
 Generation (:mod:`mani_skill_softvt.demos`), rendering, the LeRobot export and the statistics
 all find their files through :class:`DemoSet`.
@@ -23,7 +25,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..fileio import read_jsonl
+from ..fileio import file_lock, read_jsonl
 from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs, camera_size_name
 from ..tasks.suites import NUM_TASKS, get_suite
 from .lerobot import Source
@@ -82,6 +84,18 @@ class DemoSet:
         """The accepted seeds the task's QC log lists, their episode files here or not (generate
         records a listed one again where its file is missing, whatever number it is asked for)."""
         return sum(bool(r["accepted"]) for r in self.verdicts(task_id))
+
+    def task_lock(self, task_id: int):
+        """A context that holds task ``task_id``'s lock: one process at a time records, merges or
+        renders a task's files. Two runs over one suite (the campaign's two lanes, one going from
+        the first task and one from the last) then share its tasks: each waits for a task the other
+        holds and finds it done."""
+        return file_lock(self.dir / f".task{task_id}.lock")
+
+    def suite_lock(self):
+        """A context that holds the suite's lock, for the files every task's run rewrites (the
+        manifest, the QC report)."""
+        return file_lock(self.dir / ".suite.lock")
 
     def trajectory(self, task_id: int) -> Path:
         """The task's accepted episodes, ManiSkill trajectory file (its ``.json`` sits beside it)."""
