@@ -248,9 +248,11 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
     """``manifest.json``: per task the training-seed range generated (from its QC log, or the first
     ``num`` if more) and the ID evaluation range, which never overlap. Tasks an earlier manifest
     lists stay listed (a run over some tasks, or another run's, never drops the others)."""
-    def last_index(t: int) -> int:
+    requested = set(tasks)
+
+    def last_index(t: int) -> int:  # another run's task: only its log counts
         logged = [r["seed"] - train_seed(t, 0) for r in demo_set.verdicts(t)]
-        return max(logged + [(num or 0) - 1, 0])
+        return max(logged + [(num or 0) - 1 if t in requested else 0, 0])
 
     # Only ManiSkill's modes changed their gripper encoding: pd_ee_pose manifests stay as they were.
     gripper = {"gripper_action_version": GRIPPER_ACTION_VERSION} if normalized_gripper(control_mode) else {}
@@ -432,14 +434,23 @@ def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size,
     demo_set = DemoSet(Path(out), suite)
     src, dst = demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size)
     with demo_set.task_lock(task_id):
-        if rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(obs_mode, ()),
-                                get_suite(suite).frames_tactile_model(obs_mode)):  # by another run meanwhile
-            with open_h5(src) as f:
-                episodes = len(f.keys())
+        if _task_rendered(demo_set, task_id, obs_mode, camera_size):  # by another run meanwhile
+            episodes = _episodes(src)
             for _ in range(episodes):
                 queue.put(1)
             return task_id, episodes, 0
         return task_id, *render_observations(src, dst, suite, task_id, obs_mode, camera_size, progress=queue.put)
+
+
+def _task_rendered(demo_set: DemoSet, task_id: int, obs_mode: str, camera_size) -> bool:
+    """Whether the task's rendering in ``obs_mode`` at ``camera_size`` is current (:func:`rendering_is_current`)."""
+    return rendering_is_current(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
+                                CURRENT_RENDER_KEYS.get(obs_mode, ()), get_suite(demo_set.suite).frames_tactile_model(obs_mode))
+
+
+def _episodes(trajectory_h5: Path) -> int:
+    with open_h5(trajectory_h5) as f:
+        return len(f.keys())
 
 
 def rendering_is_current(trajectory_h5: Path, rendered_h5: Path, needed: tuple[str, ...] = (),
@@ -560,8 +571,7 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
         src, dst = demo_set.trajectory(t), demo_set.rendered(t, args.obs_mode, camera_size)
         if not src.exists():
             print(f"task {t}: no demos at {src}; run generate first")
-        elif rendering_is_current(src, dst, CURRENT_RENDER_KEYS.get(args.obs_mode, ()),
-                                  get_suite(args.suite).frames_tactile_model(args.obs_mode)):
+        elif _task_rendered(demo_set, t, args.obs_mode, camera_size):
             print(f"task {t}: already rendered (delete {dst.name} to redo it)")
             shutil.rmtree(rendering_parts_dir(dst), ignore_errors=True)  # a run killed after its last pack
         else:
@@ -569,10 +579,7 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
 
     size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
     try:
-        episodes = 0
-        for item in todo:
-            with open_h5(demo_set.trajectory(item[1])) as f:
-                episodes += len(f.keys())
+        episodes = sum(_episodes(demo_set.trajectory(item[1])) for item in todo)
         with tqdm(total=episodes, desc=f"render {args.obs_mode}{size}", unit="episode") as bar:
             for kind, value in run_tasks(_render_task, todo, args.workers):
                 if kind == "message":

@@ -22,33 +22,48 @@ PY=${PY:-.venv/bin/python}
 SUITE=${SUITE:-object_soft}
 store=$SOFTVT_DEMOS_DIR/$SUITE
 mkdir -p "$store"
+# Two runs over one store (the campaign's lanes) copy files in and out one at a time.
+exec 8>"$store/.sync.lock"
 # The committed small products go to the store where it lacks them or holds shorter logs (a store
-# left by an older session); the store's own, longer logs are kept.
-if [ -d "demos/$SUITE" ]; then
+# left by an older session); the store's own, longer logs are kept. A helper (HELP_FROM_LAST) skips
+# this: the run it helps, which holds the suite, did it and is writing those files now.
+if [ -d "demos/$SUITE" ] && [ -z "${HELP_FROM_LAST:-}" ]; then
+  flock 8
   (cd "demos/$SUITE" && find . -type f -print0) | while IFS= read -r -d '' f; do
     if [ ! -e "$store/$f" ] || [ "$(wc -l < "demos/$SUITE/$f")" -gt "$(wc -l < "$store/$f")" ]; then
       mkdir -p "$(dirname "$store/$f")" && cp "demos/$SUITE/$f" "$store/$f"
     fi
   done
+  flock -u 8
 fi
 sync_back() {
   mkdir -p "demos/$SUITE"
+  flock 8
   (cd "$store" && find . \( -name manifest.json -o -name qc_report.json -o -name stats.json -o -name r_max_hist.png \
       -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
+  flock -u 8
 }
 trap sync_back EXIT
+generate() {  # ACCEPTED [generate's other flags]
+  local k=$1; shift
+  "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --out "$SOFTVT_DEMOS_DIR" "$@"
+}
+render() {  # [render's other flags]
+  if [ "${RENDER_SIZE:-84x84}" != none ]; then
+    "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
+      --out "$SOFTVT_DEMOS_DIR" "$@"
+  fi
+}
 if [ -n "${HELP_FROM_LAST:-}" ]; then
   # Another run holds the suite (the campaign's other lane, going from the first task): help it
   # from the last task down, one task at a time. A process records, merges or renders a task only
-  # under that task's lock, so the two meet in the middle, each finding the other's tasks done.
+  # under that task's lock, so each waits for a task the other holds and finds it done. In a set's
+  # last round (a store recorded again from the committed QC logs) the two meet in the middle; in
+  # an earlier round the helper takes its tasks to ACCEPTED while the other run goes in rounds.
   tasks=$("$PY" -c 'from mani_skill_softvt.tasks.suites import NUM_TASKS; print(NUM_TASKS)')
   for ((t = tasks - 1; t >= 0; t--)); do
-    "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --tasks "$t" --accepted "$NUM" --num "$MAX_SEEDS" \
-      --out "$SOFTVT_DEMOS_DIR"
-    if [ "${RENDER_SIZE:-84x84}" != none ]; then
-      "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --tasks "$t" --obs-mode rgb+tactile \
-        --camera-size "${RENDER_SIZE:-84x84}" --out "$SOFTVT_DEMOS_DIR"
-    fi
+    generate "$NUM" --tasks "$t"
+    render --tasks "$t"
   done
   exit 0
 fi
@@ -68,12 +83,8 @@ first=$(( held >= NUM ? NUM : ((held / ROUND + 1) * ROUND < NUM ? (held / ROUND 
 (( held == 0 )) || echo "the QC logs list at least $held accepted demos a task: from the round of $first"
 for ((n = first; n < NUM + ROUND; n += ROUND)); do
   k=$(( n < NUM ? n : NUM ))
-  "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --workers "$WORKERS" \
-    --out "$SOFTVT_DEMOS_DIR"
+  generate "$k" --workers "$WORKERS"
   "$PY" -m mani_skill_softvt.demos stats --suite "$SUITE" --out "$SOFTVT_DEMOS_DIR" || true
-  if [ "${RENDER_SIZE:-84x84}" != none ]; then
-    "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
-      --workers "$WORKERS" --out "$SOFTVT_DEMOS_DIR"
-  fi
+  render --workers "$WORKERS"
   sync_back
 done
