@@ -110,38 +110,33 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
     gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before)."""
     demo_set = DemoSet(out, suite)
     with demo_set.task_lock(task_id):  # another run may hold it: its verdicts are read after it
-        return _generate_locked(demo_set, suite, task_id, num, accepted, out, planner, control_mode, queue)
-
-
-def _generate_locked(demo_set: DemoSet, suite: str, task_id: int, num: int, accepted: int | None, out: Path,
-                     planner: str, control_mode: str, queue) -> dict:
-    qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
-    seeds, kept, recorded = [], 0, False
-    env = None
-    for i in range(num):
-        seed = train_seed(task_id, i)
-        if accepted is not None and kept >= accepted and seed not in qc:
-            break
-        seeds.append(seed)
-        if not (seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists())):
-            # New, or accepted but its file is not here: the QC logs are committed, the demos are
-            # not, so a fresh checkout records the accepted episodes again (its new verdict is appended).
-            if env is None:
-                env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
-                demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)
-            t0 = time.perf_counter()
-            problems, ep = record_demo(env, seed, demo_set.episode_file(task_id, seed), planner)
-            line = json.loads(episode_json_line(ep, problems))
-            line["wall_s"] = round(time.perf_counter() - t0, 2)
-            append_jsonl(demo_set.qc_log(task_id), line)
-            qc[seed] = line
-            recorded = True
-        kept += bool(qc[seed]["accepted"])
-        if accepted is None or qc[seed]["accepted"]:  # one per accepted demo held (accepted_demos_expected)
-            queue.put(1)
-    if env is not None:
-        env.close()
-    return _merge_task(suite, task_id, seeds, out, recorded)
+        qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
+        seeds, kept, recorded = [], 0, False
+        env = None
+        for i in range(num):
+            seed = train_seed(task_id, i)
+            if accepted is not None and kept >= accepted and seed not in qc:
+                break
+            seeds.append(seed)
+            if not (seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists())):
+                # New, or accepted but its file is not here: the QC logs are committed, the demos are
+                # not, so a fresh checkout records the accepted episodes again (its new verdict is appended).
+                if env is None:
+                    env = make_env(suite, task_id, obs_mode="none", control_mode=control_mode)
+                    demo_set.episode_dir(task_id).mkdir(parents=True, exist_ok=True)
+                t0 = time.perf_counter()
+                problems, ep = record_demo(env, seed, demo_set.episode_file(task_id, seed), planner)
+                line = json.loads(episode_json_line(ep, problems))
+                line["wall_s"] = round(time.perf_counter() - t0, 2)
+                append_jsonl(demo_set.qc_log(task_id), line)
+                qc[seed] = line
+                recorded = True
+            kept += bool(qc[seed]["accepted"])
+            if accepted is None or qc[seed]["accepted"]:  # one per accepted demo held (accepted_demos_expected)
+                queue.put(1)
+        if env is not None:
+            env.close()
+        return _merge_task(suite, task_id, seeds, out, recorded)
 
 
 def merged_is_current(final_h5: Path, final_json: Path, seeds: list[int], episode_files: list[Path]) -> bool:
