@@ -267,8 +267,10 @@ def rerecord_agreement(qc_lines: list[dict]) -> dict:
     records again the accepted seeds its committed log lists (another machine, as a rule), and
     appends the new verdict: on another machine the same episode keeps its outcome but not its
     bits. Counts the repeats, those with the first verdict and step count, those whose R_max is the
-    same bit for bit, and the largest R_max difference with its seed (None if every one is the same)."""
-    first, agree = {}, {"repeats": 0, "same_verdict": 0, "same_steps": 0, "r_max_equal": 0,
+    same bit for bit, those that diverged (NaN R_max) in one run only, and the largest finite R_max
+    difference with its seed (None if every one is the same). Two NaNs (diverged twice) are the same;
+    one NaN is counted on its own, since no difference measures it (and JSON has no infinity)."""
+    first, agree = {}, {"repeats": 0, "same_verdict": 0, "same_steps": 0, "r_max_equal": 0, "r_max_nan_once": 0,
                         "r_max_largest_difference": 0.0, "r_max_largest_difference_seed": None}
     for line in qc_lines:
         then = first.setdefault(line["seed"], line)
@@ -277,25 +279,23 @@ def rerecord_agreement(qc_lines: list[dict]) -> dict:
         agree["repeats"] += 1
         agree["same_verdict"] += line["accepted"] == then["accepted"]
         agree["same_steps"] += line["steps"] == then["steps"]
-        if line.get("r_max") is not None and then.get("r_max") is not None:
-            difference = _r_max_difference(line["r_max"], then["r_max"])
-            agree["r_max_equal"] += difference == 0.0
-            if difference > agree["r_max_largest_difference"]:
-                agree["r_max_largest_difference"], agree["r_max_largest_difference_seed"] = difference, line["seed"]
+        if line.get("r_max") is None or then.get("r_max") is None:
+            continue
+        diverged = math.isnan(line["r_max"]), math.isnan(then["r_max"])
+        if any(diverged):
+            agree["r_max_equal" if all(diverged) else "r_max_nan_once"] += 1
+            continue
+        difference = abs(line["r_max"] - then["r_max"])
+        agree["r_max_equal"] += difference == 0.0
+        if difference > agree["r_max_largest_difference"]:
+            agree["r_max_largest_difference"], agree["r_max_largest_difference_seed"] = difference, line["seed"]
     return agree
-
-
-def _r_max_difference(a: float, b: float) -> float:
-    """|a - b|, with two NaNs (a diverged episode, twice) the same and one NaN infinitely apart:
-    a NaN would otherwise count as neither equal nor largest."""
-    if math.isnan(a) or math.isnan(b):
-        return 0.0 if math.isnan(a) and math.isnan(b) else math.inf
-    return abs(a - b)
 
 
 def _pooled_agreement(rows: list[dict]) -> dict:
     """:func:`rerecord_agreement` over every task: the counts summed, the largest difference kept."""
-    pooled = {k: sum(r["rerecorded"][k] for r in rows) for k in ("repeats", "same_verdict", "same_steps", "r_max_equal")}
+    pooled = {k: sum(r["rerecorded"].get(k, 0) for r in rows)
+              for k in ("repeats", "same_verdict", "same_steps", "r_max_equal", "r_max_nan_once")}
     worst = max(rows, key=lambda r: r["rerecorded"]["r_max_largest_difference"])["rerecorded"]
     return {**pooled, "r_max_largest_difference": worst["r_max_largest_difference"],
             "r_max_largest_difference_seed": worst["r_max_largest_difference_seed"]}
@@ -382,7 +382,9 @@ def format_stats(summary: dict) -> str:
         lines.append(f"recorded again: {n}; first verdict kept {again['same_verdict']}/{n}, step count "
                      f"{again['same_steps']}/{n}, R_max the same bits {again['r_max_equal']}/{n}"
                      + ("" if seed is None else f", largest R_max difference "
-                        f"{again['r_max_largest_difference']:.2g} (seed {seed})"))
+                        f"{again['r_max_largest_difference']:.2g} (seed {seed})")
+                     + (f", diverged (NaN R_max) in one run only {again['r_max_nan_once']}"
+                        if again.get("r_max_nan_once") else ""))
     return "\n".join(lines)
 
 

@@ -101,7 +101,7 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
     assert len(demo_set.read_qc(3)) == 2
     summary = stats("object_rigid", tmp_path)  # one episode, however often it was logged
     assert (summary["generated"], summary["accepted"]) == (1, 1)
-    assert summary["rerecorded"] == {"repeats": 1, "same_verdict": 1, "same_steps": 1, "r_max_equal": 1,
+    assert summary["rerecorded"] == {"repeats": 1, "same_verdict": 1, "same_steps": 1, "r_max_equal": 1, "r_max_nan_once": 0,
                                      "r_max_largest_difference": 0.0, "r_max_largest_difference_seed": None}
     assert "recorded again: 1; first verdict kept 1/1, step count 1/1, R_max the same bits 1/1\n" in \
         format_stats(summary) + "\n"
@@ -207,13 +207,14 @@ def test_episodes_recorded_again_are_compared_with_their_first_verdict():
            line(1), line(2, r_max=0.25 + 2**-40), line(4, steps=151, r_max=0.7),      # this machine's
            line(1, r_max=0.5 + 1e-3)]                                                   # a third machine's
     assert rerecord_agreement(log) == {"repeats": 4, "same_verdict": 4, "same_steps": 3, "r_max_equal": 1,
-                                       "r_max_largest_difference": pytest.approx(0.2),
+                                       "r_max_nan_once": 0, "r_max_largest_difference": pytest.approx(0.2),
                                        "r_max_largest_difference_seed": 4}
     assert rerecord_agreement(log[:4])["repeats"] == 0
-    nan = float("nan")  # a diverged episode: NaN twice is the same outcome, once is the largest difference
+    nan = float("nan")  # a diverged episode: NaN twice is the same outcome, once is counted on its own
     again = rerecord_agreement([line(5, r_max=nan), line(6), line(5, r_max=nan), line(6, r_max=nan)])
-    assert again["r_max_equal"] == 1 and again["r_max_largest_difference"] == float("inf")
-    assert again["r_max_largest_difference_seed"] == 6
+    assert again["r_max_equal"] == 1 and again["r_max_nan_once"] == 1
+    assert again["r_max_largest_difference"] == 0.0 and again["r_max_largest_difference_seed"] is None
+    json.dumps(again, allow_nan=False)  # stats.json stays standard JSON (no Infinity)
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
