@@ -43,6 +43,7 @@ from .data.trajectory import (
     check_h5,
     episode_digest,
     episode_json_line,
+    holds_twin_contact,
     open_h5,
     read_episode,
     rendering_current,
@@ -59,6 +60,7 @@ from .observations import camera_sensor_configs, camera_size_name, flatten_batch
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .physics.constants import physics_signature, signature_mismatch
+from .tasks.objects import TWIN_CONTACT_STATE
 from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
 from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
@@ -404,9 +406,16 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """
     env = None
+    touch_of_twins = get_suite(suite).frames_tactile_model(obs_mode) is not None and get_suite(suite).rigid
 
     def observe(seed: int, states: dict) -> list[dict]:
         nonlocal env
+        if touch_of_twins and TWIN_CONTACT_STATE not in states:
+            # PhysX has no contacts for a restored state: the pinched twin would show a blank gel.
+            raise ValueError(f"{trajectory_h5}: seed {seed} was recorded before the rigid twins' contact wrenches "
+                             f"were part of the env state, so its touch cannot be rendered; record the demos again "
+                             f"(move the episode files aside: 'python -m mani_skill_softvt.demos generate --suite "
+                             f"{suite}' records the seeds its QC logs list)")
         if env is None:
             env = make_env(suite, task_id, dsr=False, obs_mode=obs_mode, camera_size=camera_size)
         env.reset(seed=seed)
@@ -440,7 +449,13 @@ def _render_task(suite: str, task_id: int, out: str, obs_mode: str, camera_size,
 
 
 def _task_rendered(demo_set: DemoSet, task_id: int, obs_mode: str, camera_size) -> bool:
-    """Whether the task's rendering in ``obs_mode`` at ``camera_size`` is current (:func:`rendering_is_current`)."""
+    """Whether the task's rendering in ``obs_mode`` at ``camera_size`` is current (:func:`rendering_is_current`);
+    a twin's touch rendered from states without its contact wrenches (a blank gel) never is."""
+    suite = get_suite(demo_set.suite)
+    if suite.rigid and suite.frames_tactile_model(obs_mode) is not None and demo_set.trajectory(task_id).exists():
+        with open_h5(demo_set.trajectory(task_id)) as f:
+            if not all(holds_twin_contact(f[k]) for k in f.keys()):
+                return False
     return rendering_is_current(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
                                 CURRENT_RENDER_KEYS.get(obs_mode, ()), get_suite(demo_set.suite).frames_tactile_model(obs_mode))
 

@@ -34,12 +34,14 @@ TINY = dict(camera_size=(16, 16), tactile_size=(12, 16), encoder_widths=(4, 8), 
             checkpoint_every=2, warmup_steps=2, tasks=(0,), threads=1, train_timesteps=20, inference_timesteps=4)
 
 
-def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSION, camera_size=(224, 224)):
-    """Task 0 of object_soft: a trajectory file and its rgb+tactile rendering with the cameras at
+def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSION, camera_size=(224, 224),
+                 suite="object_soft", twin_contact=False):
+    """Task 0 of ``suite``: a trajectory file and its rgb+tactile rendering with the cameras at
     ``camera_size`` (random images, an action that moves with the state so that there is
-    something to learn). Called again with another size, it adds that rendering."""
+    something to learn). Called again with another size, it adds that rendering. ``twin_contact``:
+    the states hold the twins' contact wrenches (a rigid recording since they are kept)."""
     rng = np.random.default_rng(seed)
-    ds = DemoSet(root, "object_soft")
+    ds = DemoSet(root, suite)
     ds.dir.mkdir(parents=True, exist_ok=True)
     with h5py.File(ds.trajectory(0), "w") as ft, h5py.File(ds.rendered(0, "rgb+tactile", camera_size), "w") as fr:
         for e, t in enumerate(lengths):
@@ -49,6 +51,8 @@ def _write_demos(root, lengths=(9, 6), seed=0, tactile_model=TACTILE_MODEL_VERSI
             a[:, 6] = np.linspace(0, 0.8, t)
             g = ft.create_group(f"traj_{e}")
             g["actions"], g["actions_binary"] = a, np.where(np.arange(7) == 6, (a > 0.4), a).astype(np.float32)
+            if twin_contact:
+                g["env_states/contact_wrenches"] = np.zeros((t + 1, 18))
             o = fr.create_group(f"traj_{e}/obs")
             fr[f"traj_{e}"].attrs["states_sha256"] = f"episode {e} of seed {seed}"  # as demos render keeps it
             if tactile_model is not None:
@@ -670,6 +674,17 @@ def test_touch_inputs_of_another_tactile_model_are_refused(tmp_path):
     assert SUITES["object_rigid"].tactile_model != TACTILE_MODEL_VERSION
     with pytest.raises(ValueError, match=f"renders object_rigid's in model {SUITES['object_rigid'].tactile_model}"):
         load_policy(str(tmp_path / "rigid.pt"))
+
+
+def test_a_twins_touch_rendered_from_states_without_its_contact_wrenches_is_refused_for_training(tmp_path):
+    # Such a rendering shows the pinched twin on a blank gel (docs/demos.md, Rendering).
+    rigid = SUITES["object_rigid"].tactile_model
+    _write_demos(tmp_path / "old", suite="object_rigid", tactile_model=rigid)
+    with pytest.raises(ValueError, match="task0.h5:traj_0: recorded without the twins' contact wrenches.*record the demos again"):
+        load_windows(make_config("vt-c", suite="object_rigid", **TINY), tmp_path / "old", None)
+    load_windows(make_config("vo-c", suite="object_rigid", **TINY), tmp_path / "old", None)  # no touch read
+    _write_demos(tmp_path / "new", suite="object_rigid", tactile_model=rigid, twin_contact=True)
+    load_windows(make_config("vt-c", suite="object_rigid", **TINY), tmp_path / "new", None)
 
 
 def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):

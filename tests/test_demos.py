@@ -235,6 +235,56 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
         assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)
 
 
+def test_a_rigid_twins_touch_renders_from_its_stored_states_as_the_live_episode_showed_it(tmp_path):
+    """PhysX computes contacts only when it steps, so a restored state has none: the twins' contact
+    wrenches are part of the env state, and a rendering shows the pinch the live episode showed.
+    The committed rigid sample, rendered from its states and stepped live from its seed: the same
+    pressed frames, each pad's indentation within the observation's 1 um rounding (restored link
+    poses can differ from the stepped ones in their last bits), and a patch exactly while the
+    recorded pad force holds the twin."""
+    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.evaluation.wrapper import make_env
+    from mani_skill_softvt.observations import flatten_batch
+    from mani_skill_softvt.paths import REPO_DIR
+
+    src, size = REPO_DIR / "demos" / "sample" / "object_rigid" / "task3.h5", (16, 16)
+    render_observations(src, tmp_path / "touch.h5", "object_rigid", 3, "rgb+tactile", camera_size=size)
+    episode = read_episode(src)
+    env = make_env("object_rigid", 3, dsr=False, obs_mode="rgb+tactile", camera_size=size, control_mode="pd_ee_pose")
+    try:
+        seed = json.loads(src.with_suffix(".json").read_text())["episodes"][0]["episode_seed"]
+        live = [flatten_batch(env.reset(seed=seed)[0])]
+        live += [flatten_batch(env.step(a)[0]) for a in episode["actions"]]
+    finally:
+        env.close()
+    force = np.concatenate([[[0.0, 0.0]], episode["evaluator"]["pad_force"]])  # N, per observation
+    with h5py.File(tmp_path / "touch.h5", "r") as f:
+        for i, side in enumerate(("left", "right")):
+            rendered = f[f"traj_0/obs/tactile/{side}/depth"][()].astype(int)
+            stepped = np.stack([o[f"tactile/{side}/depth"] for o in live]).astype(int)
+            assert np.abs(rendered - stepped).max() <= 1, side
+            pressed = rendered.reshape(len(rendered), -1).max(1) > 0
+            assert pressed.sum() > 50 and np.array_equal(pressed, force[:, i] > 0.0), side
+            markers = f[f"traj_0/obs/tactile/{side}/marker_current"][()]
+            np.testing.assert_allclose(markers, np.stack([o[f"tactile/{side}/marker_current"] for o in live]), atol=1e-3)
+
+
+def test_a_rigid_trajectory_recorded_without_its_contact_state_is_refused_for_touch(tmp_path):
+    """An older rigid recording would render its pinch as a blank gel: refused, naming the file and the fix."""
+    import shutil
+
+    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.paths import REPO_DIR
+
+    src = tmp_path / "task3.h5"
+    shutil.copy(REPO_DIR / "demos" / "sample" / "object_rigid" / "task3.h5", src)
+    with h5py.File(src, "a") as f:
+        del f["traj_0/env_states/contact_wrenches"]
+    with pytest.raises(ValueError, match=f"{src}: seed 300000 .*record the demos again"):
+        render_observations(src, tmp_path / "touch.h5", "object_rigid", 3, "rgb+tactile", camera_size=(16, 16))
+    assert render_observations(src, tmp_path / "state.h5", "object_rigid", 3, "state_dict") == (1, 1)  # no touch: fine
+
+
 @pytest.mark.slow  # two renderings of the demo; the native size is checked by default
 def test_render_at_a_camera_size_shows_the_same_views_with_fewer_pixels(dataset, tmp_path):
     """``render --camera-size`` renders both cameras at that size (ManiSkill's sensor_configs, kept

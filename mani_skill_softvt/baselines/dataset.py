@@ -49,7 +49,7 @@ import torch
 from tqdm import tqdm
 
 from ..data.demo_set import DemoSet
-from ..data.trajectory import open_h5, tactile_model_of
+from ..data.trajectory import holds_twin_contact, open_h5, tactile_model_of
 from ..fileio import atomic_write_json, read_json
 from ..observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
 from ..tasks.suites import get_suite
@@ -180,6 +180,10 @@ def _plan_episodes(cfg: DPConfig, demos_root: Path, heldout: bool) -> tuple[list
                                      f"package renders {cfg.suite}'s in model {get_suite(cfg.suite).tactile_model}; "
                                      f"re-render with `python -m "
                                      f"mani_skill_softvt.demos render --suite {cfg.suite} --obs-mode {OBS_MODE}`")
+                if cfg.tactile and get_suite(cfg.suite).rigid and not holds_twin_contact(ft[name]):
+                    raise ValueError(f"{traj}:{name}: recorded without the twins' contact wrenches, so its rendered "
+                                     f"touch is a blank gel; record the demos again (`python -m mani_skill_softvt.demos "
+                                     f"generate --suite {cfg.suite}`, the episode files moved aside) and re-render")
                 obs = fr[name]["obs"]
                 n, steps = obs[TCP_POSE].shape[0], ft[name][_action_column(cfg)].shape[0]
                 if n != steps + 1:

@@ -33,6 +33,7 @@ from ..tasks.robot import (
     gripper_action,
     normalized_gripper,
 )
+from ..tasks.objects import TWIN_CONTACT_STATE
 from ..tasks.suites import parse_env_id, recorded_env_id
 
 # Bump when what a rendering holds for the same states changes (cameras, shaders, observation
@@ -172,6 +173,12 @@ def episode_digest(group) -> str:
         h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
         h.update(a.tobytes())
     return h.hexdigest()
+
+
+def holds_twin_contact(episode_group) -> bool:
+    """Whether a rigid-twin episode's env states hold the contact wrenches its touch is rendered
+    from. Recordings from before they were kept render the pinched twin on a blank gel."""
+    return f"env_states/{TWIN_CONTACT_STATE}" in episode_group
 
 
 def rendering_current(rendered_group, digest: str, needed: tuple[str, ...] = (), tactile_model: int | None = None) -> bool:

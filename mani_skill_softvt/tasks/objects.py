@@ -178,16 +178,28 @@ def build_objects(specs: list[ObjectSpec], scene, soft_sleep: bool = True) -> Sc
     return RigidTwins(specs, scene) if specs[0].rigid else FEMObjects(specs, scene, soft_sleep)
 
 
+# The env-state key of a twin scene's last-tick contact wrenches (RigidTwins below).
+TWIN_CONTACT_STATE = "contact_wrenches"
+
+
 class RigidTwins(SceneObjects):
-    """Rigid twins: PhysX does everything, and contact wrenches come from its contact impulses."""
+    """Rigid twins: PhysX does everything, and contact wrenches come from its contact impulses.
+
+    Those impulses are the last tick's, which a restored state does not have (PhysX computes
+    contacts only when it steps): the wrenches on the robot's feedback links are part of the
+    twins' state (``contact_wrenches``), as the coupling's wrenches are of the FEM state, and a
+    restored state's wrenches stand until the next tick. Without them a state restored to render
+    its observations would show a pinched twin to the gel with no force: a blank tactile frame."""
 
     deformable = False
     contact_radius = 0.0
+    STATE_KEY = TWIN_CONTACT_STATE
 
     def __init__(self, specs: list[ObjectSpec], scene):
         super().__init__(specs, scene)
         self.bodies = {spec.name: self._build(spec, k) for k, spec in enumerate(specs)}
         self.robot = None
+        self._restored_wrenches: np.ndarray | None = None  # (len(FEEDBACK_LINKS), 6), until the next tick
 
     def _build(self, spec: ObjectSpec, k: int) -> RigidObject:
         """A rigid twin as ManiSkill builds any object: convex parts with the card's friction and
@@ -214,6 +226,7 @@ class RigidTwins(SceneObjects):
             obj.scale_mass(mass)  # a rigid body has no modulus to scale
 
     def place(self, name: str, pose: np.ndarray) -> None:
+        self._restored_wrenches = None
         self.bodies[name].set_pose(pose)  # PhysX rests it on the support
 
     def settle(self, speed: float, max_time: float, robot) -> dict:
@@ -222,6 +235,7 @@ class RigidTwins(SceneObjects):
         qpos, qvel = robot.get_qpos().clone(), robot.get_qvel().clone()
         ticks, max_ticks, min_ticks = 0, int(max_time * C.SIM_FREQ), C.SIM_FREQ // 10
         while True:
+            self.before_sim_step()
             self.scene.step()
             robot.set_qpos(qpos)
             robot.set_qvel(qvel)
@@ -239,7 +253,13 @@ class RigidTwins(SceneObjects):
     def node_velocities(self, name: str) -> np.ndarray:
         return self.bodies[name].node_velocities()
 
+    def before_sim_step(self) -> None:
+        self._restored_wrenches = None  # the tick about to run computes its own contacts
+
     def contact_wrenches(self, links: tuple[str, ...]) -> dict[str, np.ndarray]:
+        if self._restored_wrenches is not None:
+            restored = dict(zip(fingers.FEEDBACK_LINKS, self._restored_wrenches))
+            return {name: restored[name].copy() for name in links}
         contacts = self.scene.px.get_contacts()
         dt = 1.0 / C.SIM_FREQ
         links_map = self.robot.links_map
@@ -257,6 +277,28 @@ class RigidTwins(SceneObjects):
     def contact_surface(self) -> tuple[np.ndarray, np.ndarray]:
         """The hulls PhysX collides (not the tet boundary, which can sit outside them)."""
         return join_meshes([body.surface() for body in self.bodies.values()])
+
+    def state_dict(self) -> dict:
+        return {self.STATE_KEY: torch.from_numpy(self._state_vector()[None])}
+
+    def load_state_dict(self, state: dict) -> None:
+        # A state recorded before the wrenches were kept leaves PhysX's own (stale) contacts:
+        # its poses restore exactly, its touch cannot (render refuses such a trajectory).
+        if self.STATE_KEY in state:
+            self.set_state_vector(np.asarray(to_numpy(state[self.STATE_KEY]), np.float64).reshape(-1))
+
+    @property
+    def state_size(self) -> int:
+        return 6 * len(fingers.FEEDBACK_LINKS)
+
+    def _state_vector(self) -> np.ndarray:
+        wrenches = self.contact_wrenches(fingers.FEEDBACK_LINKS)
+        return np.concatenate([wrenches[name] for name in fingers.FEEDBACK_LINKS]).astype(np.float64)
+
+    def set_state_vector(self, vec: np.ndarray) -> None:
+        if vec.size != self.state_size:
+            raise ValueError(f"rigid twins' contact state has {vec.size} values, this scene needs {self.state_size}")
+        self._restored_wrenches = vec.reshape(len(fingers.FEEDBACK_LINKS), 6).copy()
 
     def check_state_dict(self, state: dict) -> None:
         if "soft" in state:
