@@ -406,7 +406,7 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """
     env = None
-    touch_of_twins = get_suite(suite).frames_tactile_model(obs_mode) is not None and get_suite(suite).rigid
+    touch_of_twins = get_suite(suite).rigid and get_suite(suite).frames_tactile_model(obs_mode) is not None
 
     def observe(seed: int, states: dict) -> list[dict]:
         nonlocal env
@@ -457,7 +457,7 @@ def _task_rendered(demo_set: DemoSet, task_id: int, obs_mode: str, camera_size) 
             if not all(holds_twin_contact(f[k]) for k in f.keys()):
                 return False
     return rendering_is_current(demo_set.trajectory(task_id), demo_set.rendered(task_id, obs_mode, camera_size),
-                                CURRENT_RENDER_KEYS.get(obs_mode, ()), get_suite(demo_set.suite).frames_tactile_model(obs_mode))
+                                CURRENT_RENDER_KEYS.get(obs_mode, ()), suite.frames_tactile_model(obs_mode))
 
 
 def _episodes(trajectory_h5: Path) -> int:
