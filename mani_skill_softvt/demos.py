@@ -34,7 +34,7 @@ from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from .data.demo_set import DemoSet
+from .data.demo_set import DemoSet, latest_verdicts
 from .data.lerobot import export_lerobot
 from .data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
 from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
@@ -311,7 +311,8 @@ def stats(suite: str, out: Path) -> dict:
     demo_set = DemoSet(out, suite)
     rows, all_r, corrupt = [], [], []
     for t in range(NUM_TASKS):
-        qc = demo_set.verdicts(t)
+        log = demo_set.read_qc(t)
+        qc = latest_verdicts(log)
         if not qc:
             continue
         # From the QC log, so an interrupted run (episodes recorded, not yet merged) counts too.
@@ -325,7 +326,7 @@ def stats(suite: str, out: Path) -> dict:
                      "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
                      "seconds_per_demo": float(np.mean(walls)) if walls else None,
                      "rejected": dict(Counter(p for q in qc for p in q.get("problems", []))),
-                     "rerecorded": rerecord_agreement(demo_set.read_qc(t))})
+                     "rerecorded": rerecord_agreement(log)})
     if not rows:
         raise FileNotFoundError(f"no demos of suite '{suite}' under {out}; run "
                                 f"'python -m mani_skill_softvt.demos generate --suite {suite} --out {out}' first")

@@ -198,6 +198,7 @@ def test_stats(dataset, tmp_path):
 
 
 def test_episodes_recorded_again_are_compared_with_their_first_verdict():
+    from mani_skill_softvt.data.demo_set import latest_verdicts
     from mani_skill_softvt.demos import rerecord_agreement
 
     def line(seed, accepted=True, steps=150, r_max=0.5):
@@ -210,6 +211,9 @@ def test_episodes_recorded_again_are_compared_with_their_first_verdict():
                                        "r_max_nan_once": 0, "r_max_largest_difference": pytest.approx(0.2),
                                        "r_max_largest_difference_seed": 4}
     assert rerecord_agreement(log[:4])["repeats"] == 0
+    # Each seed's verdict is its latest line, in the order the seeds were first logged.
+    assert [(q["seed"], q["r_max"]) for q in latest_verdicts(log)] == [(1, 0.5 + 1e-3), (2, 0.25 + 2**-40),
+                                                                     (3, 0.5), (4, 0.7)]
     nan = float("nan")  # a diverged episode: NaN twice is the same outcome, once is counted on its own
     again = rerecord_agreement([line(5, r_max=nan), line(6), line(5, r_max=nan), line(6, r_max=nan)])
     assert again["r_max_equal"] == 1 and again["r_max_nan_once"] == 1

@@ -31,6 +31,12 @@ from ..tasks.suites import NUM_TASKS, get_suite
 from .lerobot import Source
 
 
+def latest_verdicts(qc_log: list[dict]) -> list[dict]:
+    """One screening record per seed, its latest (an episode recorded again on another machine
+    appends a second line), in the order the seeds were first logged."""
+    return list({r["seed"]: r for r in qc_log}.values())
+
+
 @dataclass(frozen=True)
 class DemoSet:
     """The demonstrations of ``suite`` under ``root`` (see the module docstring)."""
@@ -76,9 +82,8 @@ class DemoSet:
         return read_jsonl(self.qc_log(task_id))
 
     def verdicts(self, task_id: int) -> list[dict]:
-        """One screening record per seed, its latest (an episode recorded again on another machine
-        appends a second line), in the order the seeds were first logged."""
-        return list({r["seed"]: r for r in self.read_qc(task_id)}.values())
+        """The task's :func:`latest_verdicts`."""
+        return latest_verdicts(self.read_qc(task_id))
 
     def accepted_listed(self, task_id: int) -> int:
         """The accepted seeds the task's QC log lists, their episode files here or not (generate
