@@ -407,7 +407,8 @@ def render_observations(trajectory_h5: Path, out_h5: Path, suite: str, task_id: 
     episodes in the file and how many were rendered now; ``progress(1)`` per episode.
     """
     env = None
-    touch_of_twins = get_suite(suite).rigid and get_suite(suite).frames_tactile_model(obs_mode) is not None
+    spec = get_suite(suite)
+    touch_of_twins = spec.rigid and spec.frames_tactile_model(obs_mode) is not None
 
     def observe(seed: int, states: dict) -> list[dict]:
         nonlocal env
