@@ -67,12 +67,17 @@ def test_seed_spread_from_two_training_seeds_then_rigid_against_soft(tmp_path):
     # Diffusion Policy did not show.
     assert f2["claims"][0]["ours"] == "a>b" and f2["claims"][0]["verdict"] == F.CONTRADICTED
     assert f2["pairs"]["vt-c"] is None and len(f2["claims"]) == 1 and f2["verdict"] == F.CONTRADICTED
+    # Beside the verdict, unjudged: the rigid policy against each soft seed (seed 1 carries 396).
+    pairings = f2["claims"][0]["pairings"]
+    assert sorted(pairings) == ["0/0", "0/1"] and [p["ours"] for p in pairings.values()] == ["a>b", "a>b"]
+    assert pairings["0/1"]["comparison"]["difference"] == pytest.approx(104 / 500)
     # Finding 1: no success left the tolerance in either complete seed: contradicted.
     assert [c["verdict"] for c in result["finding1"]["claims"][:2]] == [F.CONTRADICTED] * 2
     assert result["finding1"]["claims"][2]["ours"] == "missing"  # no VT-C
     assert result["finding4"]["verdict"] == F.UNRESOLVED  # no OOD records
     text = (tmp_path / "findings.md").read_text()
     assert "object_soft vo-c-cpu: seed 0 vs seed 1" in text and "**contradicted**" in text
+    assert "0/0: a>b +20.0; 0/1: a>b +20.8" in text
 
 
 def test_a_partial_run_is_shown_but_not_judged(tmp_path):
@@ -88,6 +93,7 @@ def test_a_partial_run_is_shown_but_not_judged(tmp_path):
     assert verdicts["vo-c-cpu seed 0 (vo-c,cpu)"] == F.CONTRADICTED
     f3 = result["finding3"]
     assert f3["rows"]["vo-b"] is None and f3["claims"][0]["ours"] == "missing"
+    assert f3["claims"][0]["pairings"] == {}  # partial runs are not paired either
 
 
 def test_violations_that_depend_on_the_policy_and_a_misranking(tmp_path):
@@ -102,6 +108,8 @@ def test_violations_that_depend_on_the_policy_and_a_misranking(tmp_path):
     f1 = F.main([str(tmp_path)])["finding1"]
     assert [c["verdict"] for c in f1["claims"]] == [F.CONTRADICTED, F.CONTRADICTED, F.SUPPORTED, F.SUPPORTED]
     assert f1["claims"][3]["ours"] == "differ" and f1["verdict"] == F.CONTRADICTED  # VO-C kept every success within
+    # VT-C's one seed against each of VO-C's two, unjudged beside the first seeds' verdict.
+    assert {k: p["ours"] for k, p in f1["claims"][3]["pairings"].items()} == {"0/0": "a>b", "0/1": "a>b"}
     (pair,) = f1["misrankings"].values()
     assert pair["tsr"]["difference"] == pytest.approx(-0.10) and pair["dsr"]["difference"] == pytest.approx(0.20)
 

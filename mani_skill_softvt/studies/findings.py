@@ -34,6 +34,10 @@ The rules.
   paper's point: no two noisy estimates): a count above zero supports it, a count of zero on a
   complete run contradicts it.
 - A finding is supported when all its claims are, contradicted when any is, unresolved otherwise.
+
+Beside each claim between two trained policies, the report shows what the same rule says on every
+pair of their complete training seeds (A's seed / B's seed). That is not a verdict (the verdict is
+the first seeds', as above); it shows whether the verdict would survive another pairing.
 """
 
 from __future__ import annotations
@@ -138,9 +142,9 @@ def difference(c: dict | None, spread: float | None) -> str:
     return "equivalent" if -spread <= lo and hi <= spread else "inconclusive"
 
 
-def claim(text: str, ours: str, paper: str) -> dict:
+def claim(text: str, ours: str, paper: str, pairings: dict | None = None) -> dict:
     """A claim's verdict: ``paper`` is ``a>b``, ``a<b``, ``differ`` (either way) or ``equivalent``;
-    ``ours`` as :func:`difference` gives it."""
+    ``ours`` as :func:`difference` gives it. ``pairings`` (:func:`seed_pairings`) ride along unjudged."""
     if paper == "differ" and ours in ("a>b", "a<b"):
         ours = "differ"
     if ours in ("missing", "unknown", "inconclusive"):
@@ -149,7 +153,24 @@ def claim(text: str, ours: str, paper: str) -> dict:
         verdict = SUPPORTED if ours == "equivalent" else CONTRADICTED
     else:
         verdict = SUPPORTED if ours == paper else CONTRADICTED
-    return {"claim": text, "ours": ours, "paper": paper, "verdict": verdict}
+    return {"claim": text, "ours": ours, "paper": paper, "verdict": verdict, "pairings": pairings or {}}
+
+
+def seed_pairings(seeds_a: dict, seeds_b: dict, outcome: str, spread: float | None, key=None) -> dict:
+    """A against B on every pair of their complete training seeds, ``"<A seed>/<B seed>"`` ->
+    the paired comparison and what :func:`difference` makes of it."""
+    out = {}
+    for i, a in sorted(seeds_a.items()):
+        for j, b in sorted(seeds_b.items()):
+            if complete(a) and complete(b):
+                c = compare(a, b, outcome, key)
+                out[f"{i}/{j}"] = {"comparison": c, "ours": difference(c, spread)}
+    return out
+
+
+def seeds_of(policies: dict, suite: str, key: str) -> dict:
+    """Every training seed's records of a finding's policy (``vo-c`` ...) on a suite."""
+    return policies.get((suite, POLICIES[key]), {})
 
 
 def overall(claims: list[dict]) -> str:
@@ -184,7 +205,9 @@ def finding1(policies: dict, spread: dict) -> dict:
     vo, vt = first_seed(policies, "object_soft", "vo-c"), first_seed(policies, "object_soft", "vt-c")
     gap = compare(vt, vo, "past_tolerance")
     claims.append(claim("VT-C's count past tolerance differs from VO-C's (paper: 48 against 19 of 500)",
-                        difference(gap, spread["past_tolerance"]), "differ"))
+                        difference(gap, spread["past_tolerance"]), "differ",
+                        seed_pairings(seeds_of(policies, "object_soft", "vt-c"), seeds_of(policies, "object_soft", "vo-c"),
+                                      "past_tolerance", spread["past_tolerance"])))
     firsts = {n: s[0] for (suite, n), s in policies.items() if suite == "object_soft" and complete(s.get(0))}
     reversals = {}
     names = sorted(firsts)
@@ -205,7 +228,9 @@ def finding2(policies: dict, spread: dict) -> dict:
     pairs = {key: compare(first_seed(policies, "object_rigid", key), first_seed(policies, "object_soft", key),
                           "success", seed_key) for key in ("vo-c", "vt-c")}
     claims = [claim("vo-c: rigid twin TSR = soft TSR (paper +2.6 points, inside its resolution)",
-                    difference(pairs["vo-c"], spread["success"]), "equivalent")]
+                    difference(pairs["vo-c"], spread["success"]), "equivalent",
+                    seed_pairings(seeds_of(policies, "object_rigid", "vo-c"), seeds_of(policies, "object_soft", "vo-c"),
+                                  "success", spread["success"], seed_key))]
     return {"pairs": pairs, "claims": claims, "verdict": overall(claims)}
 
 
@@ -218,15 +243,20 @@ def finding3(policies: dict, spread: dict, binary_close: dict | None) -> dict:
     comps = {name: {o: compare(soft[a], soft[b], o) for o in ("success", "dsr_success")} for name, (a, b) in pairs.items()}
     control_vo, control_vt = comps["VO-C - VO-B (control, vision only)"], comps["VT-C - VT-B (control, with touch)"]
     touch_c = comps["VT-C - VO-C (touch, continuous)"]
+
+    def every(a: str, b: str, outcome: str) -> dict:
+        return seed_pairings(seeds_of(policies, "object_soft", a), seeds_of(policies, "object_soft", b),
+                             outcome, spread[outcome])
+
     claims = [
         claim("continuous control alone raises TSR (VO-C > VO-B; paper +11.4)",
-              difference(control_vo["success"], spread["success"]), "a>b"),
+              difference(control_vo["success"], spread["success"]), "a>b", every("vo-c", "vo-b", "success")),
         claim("touch adds no TSR on top of continuous control (VT-C = VO-C; paper -0.2)",
-              difference(touch_c["success"], spread["success"]), "equivalent"),
+              difference(touch_c["success"], spread["success"]), "equivalent", every("vt-c", "vo-c", "success")),
         claim("continuous control raises DSR with vision only (VO-C > VO-B; paper +11.2)",
-              difference(control_vo["dsr_success"], spread["dsr_success"]), "a>b"),
+              difference(control_vo["dsr_success"], spread["dsr_success"]), "a>b", every("vo-c", "vo-b", "dsr_success")),
         claim("continuous control raises DSR with touch (VT-C > VT-B; paper +7.0)",
-              difference(control_vt["dsr_success"], spread["dsr_success"]), "a>b"),
+              difference(control_vt["dsr_success"], spread["dsr_success"]), "a>b", every("vt-c", "vt-b", "dsr_success")),
     ]
     return {"rows": rows, "comparisons": comps, "binary_close": binary_close, "claims": claims,
             "verdict": overall(claims)}
@@ -313,8 +343,10 @@ def _pts(c: dict | None) -> str:
 
 
 def _claims(lines: list[str], f: dict) -> None:
-    lines += ["", "| claim | ours | verdict |", "|---|---|---|"]
-    lines += [f"| {c['claim']} | {c['ours']} | **{c['verdict']}** |" for c in f["claims"]]
+    lines += ["", "| claim | ours | verdict | ours on every pair of training seeds (A/B), not judged |", "|---|---|---|---|"]
+    for c in f["claims"]:
+        every = "; ".join(f"{k}: {p['ours']} {100 * p['comparison']['difference']:+.1f}" for k, p in c.get("pairings", {}).items())
+        lines.append(f"| {c['claim']} | {c['ours']} | **{c['verdict']}** | {every or '-'} |")
 
 
 def build(result: dict) -> str:
