@@ -35,9 +35,11 @@ The rules.
   complete run contradicts it.
 - A finding is supported when all its claims are, contradicted when any is, unresolved otherwise.
 
-Beside each claim between two trained policies, the report shows what the same rule says on every
-pair of their complete training seeds (A's seed / B's seed). That is not a verdict (the verdict is
-the first seeds', as above); it shows whether the verdict would survive another pairing.
+Beside each ID claim between two trained policies, the report shows what the same rule says on
+every pair of their complete training seeds (A's seed / B's seed; a ``differ`` claim's pairings keep
+their direction, ``a>b`` or ``a<b``). That is not a verdict (the verdict is the first seeds', as
+above); it shows whether the verdict would survive another pairing. The OOD claims have none: only
+the first seeds ran the OOD protocol.
 """
 
 from __future__ import annotations
@@ -201,7 +203,7 @@ def finding1(policies: dict, spread: dict) -> dict:
             count = s["task_successes"] - s["dsr_successes"]
             verdict = SUPPORTED if count else CONTRADICTED if complete(recs) else UNRESOLVED
             claims.append({"claim": f"{label}: successes past tolerance > 0", "ours": f"{count} of {s['episodes']}",
-                           "paper": "> 0", "verdict": verdict})
+                           "paper": "> 0", "verdict": verdict, "pairings": {}})
     vo, vt = first_seed(policies, "object_soft", "vo-c"), first_seed(policies, "object_soft", "vt-c")
     gap = compare(vt, vo, "past_tolerance")
     claims.append(claim("VT-C's count past tolerance differs from VO-C's (paper: 48 against 19 of 500)",
@@ -345,7 +347,7 @@ def _pts(c: dict | None) -> str:
 def _claims(lines: list[str], f: dict) -> None:
     lines += ["", "| claim | ours | verdict | ours on every pair of training seeds (A/B), not judged |", "|---|---|---|---|"]
     for c in f["claims"]:
-        every = "; ".join(f"{k}: {p['ours']} {100 * p['comparison']['difference']:+.1f}" for k, p in c.get("pairings", {}).items())
+        every = "; ".join(f"{k}: {p['ours']} {100 * p['comparison']['difference']:+.1f}" for k, p in c["pairings"].items())
         lines.append(f"| {c['claim']} | {c['ours']} | **{c['verdict']}** | {every or '-'} |")
 
 
