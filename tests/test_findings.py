@@ -103,13 +103,16 @@ def test_violations_that_depend_on_the_policy_and_a_misranking(tmp_path):
     # VT-C succeeds more often but squeezes 150 of its 400 successes past tolerance: TSR ranks it
     # above VO-C, DSR below.
     vt = [_rec(i, i < 400, 1.5 if i < 150 else 0.5, "vt-c-cpu", "vt-c,cpu,rgb+depth") for i in range(n)]
-    for name, recs in (("vo-c-cpu", vo), ("vo-c-cpu-seed1", vo1), ("vt-c-cpu", vt)):
+    vt1 = [_rec(i, True, 0.5, "vt-c-cpu-seed1", "vt-c,cpu,rgb+depth") for i in range(5)]  # a partial run
+    for name, recs in (("vo-c-cpu", vo), ("vo-c-cpu-seed1", vo1), ("vt-c-cpu", vt), ("vt-c-cpu-seed1", vt1)):
         _write(tmp_path / f"object_soft_id_{name}.jsonl", recs)
     f1 = F.main([str(tmp_path)])["finding1"]
-    assert [c["verdict"] for c in f1["claims"]] == [F.CONTRADICTED, F.CONTRADICTED, F.SUPPORTED, F.SUPPORTED]
-    assert f1["claims"][3]["ours"] == "differ" and f1["verdict"] == F.CONTRADICTED  # VO-C kept every success within
-    # VT-C's one seed against each of VO-C's two, unjudged beside the first seeds' verdict.
-    assert {k: p["ours"] for k, p in f1["claims"][3]["pairings"].items()} == {"0/0": "a>b", "0/1": "a>b"}
+    # VO-C seeds 0 and 1, VT-C seeds 0 and 1 (partial: not judged), then VT-C against VO-C.
+    assert [c["verdict"] for c in f1["claims"]] == [F.CONTRADICTED, F.CONTRADICTED, F.SUPPORTED, F.UNRESOLVED,
+                                                    F.SUPPORTED]
+    assert f1["claims"][-1]["ours"] == "differ" and f1["verdict"] == F.CONTRADICTED  # VO-C kept every success within
+    # VT-C's one complete seed against each of VO-C's two (not its partial seed 1), unjudged.
+    assert {k: p["ours"] for k, p in f1["claims"][-1]["pairings"].items()} == {"0/0": "a>b", "0/1": "a>b"}
     (pair,) = f1["misrankings"].values()
     assert pair["tsr"]["difference"] == pytest.approx(-0.10) and pair["dsr"]["difference"] == pytest.approx(0.20)
 
