@@ -184,7 +184,7 @@ def overall(claims: list[dict]) -> str:
 
 def first_seed(policies: dict, suite: str, key: str) -> list[dict] | None:
     """Training seed 0 of a finding's policy (``vo-c`` ...) on a suite, if its run is complete."""
-    recs = policies.get((suite, POLICIES[key]), {}).get(0)
+    recs = seeds_of(policies, suite, key).get(0)
     return recs if complete(recs) else None
 
 
