@@ -175,6 +175,12 @@ def seeds_of(policies: dict, suite: str, key: str) -> dict:
     return policies.get((suite, POLICIES[key]), {})
 
 
+def every_pairing(policies: dict, a: str, b: str, outcome: str, spread: float | None,
+                  suites: tuple[str, str] = ("object_soft", "object_soft"), key=None) -> dict:
+    """:func:`seed_pairings` of two findings' policies (``vo-c`` ...), each on its suite."""
+    return seed_pairings(seeds_of(policies, suites[0], a), seeds_of(policies, suites[1], b), outcome, spread, key)
+
+
 def overall(claims: list[dict]) -> str:
     verdicts = {c["verdict"] for c in claims}
     if CONTRADICTED in verdicts:
@@ -208,8 +214,7 @@ def finding1(policies: dict, spread: dict) -> dict:
     gap = compare(vt, vo, "past_tolerance")
     claims.append(claim("VT-C's count past tolerance differs from VO-C's (paper: 48 against 19 of 500)",
                         difference(gap, spread["past_tolerance"]), "differ",
-                        seed_pairings(seeds_of(policies, "object_soft", "vt-c"), seeds_of(policies, "object_soft", "vo-c"),
-                                      "past_tolerance", spread["past_tolerance"])))
+                        every_pairing(policies, "vt-c", "vo-c", "past_tolerance", spread["past_tolerance"])))
     firsts = {n: s[0] for (suite, n), s in policies.items() if suite == "object_soft" and complete(s.get(0))}
     reversals = {}
     names = sorted(firsts)
@@ -231,8 +236,8 @@ def finding2(policies: dict, spread: dict) -> dict:
                           "success", seed_key) for key in ("vo-c", "vt-c")}
     claims = [claim("vo-c: rigid twin TSR = soft TSR (paper +2.6 points, inside its resolution)",
                     difference(pairs["vo-c"], spread["success"]), "equivalent",
-                    seed_pairings(seeds_of(policies, "object_rigid", "vo-c"), seeds_of(policies, "object_soft", "vo-c"),
-                                  "success", spread["success"], seed_key))]
+                    every_pairing(policies, "vo-c", "vo-c", "success", spread["success"],
+                                  ("object_rigid", "object_soft"), seed_key))]
     return {"pairs": pairs, "claims": claims, "verdict": overall(claims)}
 
 
@@ -246,19 +251,19 @@ def finding3(policies: dict, spread: dict, binary_close: dict | None) -> dict:
     control_vo, control_vt = comps["VO-C - VO-B (control, vision only)"], comps["VT-C - VT-B (control, with touch)"]
     touch_c = comps["VT-C - VO-C (touch, continuous)"]
 
-    def every(a: str, b: str, outcome: str) -> dict:
-        return seed_pairings(seeds_of(policies, "object_soft", a), seeds_of(policies, "object_soft", b),
-                             outcome, spread[outcome])
-
     claims = [
         claim("continuous control alone raises TSR (VO-C > VO-B; paper +11.4)",
-              difference(control_vo["success"], spread["success"]), "a>b", every("vo-c", "vo-b", "success")),
+              difference(control_vo["success"], spread["success"]), "a>b",
+              every_pairing(policies, "vo-c", "vo-b", "success", spread["success"])),
         claim("touch adds no TSR on top of continuous control (VT-C = VO-C; paper -0.2)",
-              difference(touch_c["success"], spread["success"]), "equivalent", every("vt-c", "vo-c", "success")),
+              difference(touch_c["success"], spread["success"]), "equivalent",
+              every_pairing(policies, "vt-c", "vo-c", "success", spread["success"])),
         claim("continuous control raises DSR with vision only (VO-C > VO-B; paper +11.2)",
-              difference(control_vo["dsr_success"], spread["dsr_success"]), "a>b", every("vo-c", "vo-b", "dsr_success")),
+              difference(control_vo["dsr_success"], spread["dsr_success"]), "a>b",
+              every_pairing(policies, "vo-c", "vo-b", "dsr_success", spread["dsr_success"])),
         claim("continuous control raises DSR with touch (VT-C > VT-B; paper +7.0)",
-              difference(control_vt["dsr_success"], spread["dsr_success"]), "a>b", every("vt-c", "vt-b", "dsr_success")),
+              difference(control_vt["dsr_success"], spread["dsr_success"]), "a>b",
+              every_pairing(policies, "vt-c", "vt-b", "dsr_success", spread["dsr_success"])),
     ]
     return {"rows": rows, "comparisons": comps, "binary_close": binary_close, "claims": claims,
             "verdict": overall(claims)}
