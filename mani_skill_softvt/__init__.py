@@ -12,6 +12,11 @@ Layout (one concept, one place):
 - ``evaluation/``  R_t / R_max / DSR metrics, DSR wrapper, ID/OOD protocols, runner, reports, videos
 """
 
-from .version import __version__  # noqa: F401
+# First: the CPU dispatch of every library below is pinned before any of them loads (numerics.py).
+from . import numerics  # noqa: E402
+
+numerics.pin()
+
+from .version import __version__  # noqa: E402,F401
 
 from . import tasks  # noqa: E402,F401  (registers the four suites and SoftGraspLift-v1)

@@ -59,6 +59,7 @@ from .fileio import append_jsonl, atomic_write, atomic_write_json, read_json
 from .observations import camera_sensor_configs, camera_size_name, flatten_batch, parse_image_size, tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
+from .numerics import chosen as chosen_numerics
 from .physics.constants import physics_signature, signature_mismatch
 from .tasks.objects import TWIN_CONTACT_STATE
 from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
@@ -217,6 +218,11 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
         if stale:
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
+        numerics = recorded.get("numerics")
+        if any(demo_set.dir.glob("task*.h5")) and numerics != chosen_numerics().name:
+            raise ValueError(f"{demo_set.manifest}: the demos there were recorded under numerics "
+                             f"{numerics or 'native (before the pins)'}, this process runs {chosen_numerics().name}; "
+                             f"generate into another --out, or set SOFTVT_NUMERICS={numerics or 'native'} to extend them")
     # Written first (a resumed run checks its physics), and again with the seeds actually drawn.
     _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None if accepted else num)
     total = sum(accepted_demos_expected(demo_set, t, num, accepted) for t in tasks) if accepted else len(tasks) * num
@@ -253,12 +259,16 @@ def _write_manifest(demo_set: DemoSet, tasks: list[int], planner: str, control_m
 
     # Only ManiSkill's modes changed their gripper encoding: pd_ee_pose manifests stay as they were.
     gripper = {"gripper_action_version": GRIPPER_ACTION_VERSION} if normalized_gripper(control_mode) else {}
+    # The numerics the episodes were recorded under (numerics.py); a set from before the pins names none.
+    numerics = {"numerics": chosen_numerics().name}
     with demo_set.suite_lock():
         if demo_set.manifest.exists():
-            tasks = sorted(set(tasks) | {int(t) for t in read_json(demo_set.manifest).get("train_seeds", {})})
+            old = read_json(demo_set.manifest)
+            tasks = sorted(set(tasks) | {int(t) for t in old.get("train_seeds", {})})
+            numerics = {"numerics": old["numerics"]} if "numerics" in old else {}
         atomic_write_json(demo_set.manifest, {
             "suite": demo_set.suite, "expert_planner": planner, "control_mode": control_mode, **gripper,
-            "physics": physics,
+            "physics": physics, **numerics,
             "train_seeds": {t: [train_seed(t, 0), train_seed(t, last_index(t))] for t in tasks},
             "id_eval_seeds": {t: [id_seed(t, 0), id_seed(t, ID_EPISODES_PER_TASK - 1)] for t in tasks},
             "note": "training and evaluation seed ranges are disjoint by construction"})

@@ -32,7 +32,8 @@ from .evaluation.run import DEFAULT_TASKS, RunConfig
 from .evaluation.runner import evaluate, relative_difference, reproduce, run_records
 from .evaluation.videos import record_episode_video, video_name
 from .observations import parse_image_size
-from .stack import software_stack, stack_differences, unrecorded
+from .numerics import numerics_of, reproduction_note
+from .stack import MACHINE_KEYS, software_stack, stack_differences, unrecorded
 from .tasks.suites import SUITES, task_spec
 
 
@@ -135,8 +136,16 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         gaps = [(f, relative_difference(r.get(f), new.get(f)) if new is not None and "." not in f else None) for f in fields]
         named = [f if gap is None else f"{f} (by at most {gap:.1e} relative)" for f, gap in gaps]
         print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
-    print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced")
+    named = bool(results) and bool(results[0][0]["receipt"].get("numerics"))
+    print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced (numerics "
+          f"{numerics_of(results[0][0]) if results else '-'}, "
+          f"{'as the records name them' if named else 'as machines of their kind ran before the pins'})")
+    note = reproduction_note(results[0][0], software_stack()) if results else None
+    if note:
+        print(note)
     other = stack_differences(results[0][0]["receipt"].get("stack"), software_stack()) if results else []
+    # The machine's kind is said above; under pinned numerics it does not choose the bits at all.
+    other = [d for d in other if d.split()[0] not in MACHINE_KEYS]
     unknown = unrecorded(other)
     mismatched = [d for d in other if not d.endswith(" unrecorded")]
     if mismatched:
@@ -158,7 +167,10 @@ def _rescore(path: Path, percentile: float | None, out: Path) -> dict:
         raise SystemExit("--rescore needs --percentile")
     if not Path(path).exists():
         raise SystemExit(f"--rescore: {path} does not exist")
-    records = read_records(path)  # every record verified against its hash
+    try:
+        records = read_records(path)  # every record verified against its hash
+    except ValueError as e:  # RecordIntegrityError, or a line that is not JSON: one line naming file and line
+        raise SystemExit(f"--rescore: {e}") from None
     if not records:
         raise SystemExit(f"no records in {path}")
     new = []

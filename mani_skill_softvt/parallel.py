@@ -41,6 +41,8 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from queue import Empty
 
+from .numerics import chosen, environment
+
 RAY_INSTALL_HINT = "pip install 'mani-skill-softvt[ray]' (from a checkout: pip install -e '.[ray]')"
 # A work item is one core's job. A BLAS thread pool in each would spin against the other workers:
 # beside one other job, a reset's 1,296 small matrix inverses (Newton's tet builder) took 6-15 s
@@ -55,19 +57,21 @@ _MESSAGE, _RESULT, _ERROR = "message", "result", "error"
 
 
 def run_tasks(fn: Callable, items: Sequence[tuple], workers: int = 1, ray_address: str | None = None,
-              report_deaths: bool = False) -> Iterator[tuple[str, object]]:
+              report_deaths: bool = False, numerics: str | None = None) -> Iterator[tuple[str, object]]:
     """Run ``fn(*args, queue)`` for each ``args`` in ``items``; yield its messages and results.
 
     ``fn`` must be a module-level (picklable) function. A work item's exception is re-raised
     here, after the messages it put before failing were yielded. A work item whose process dies
     (SIGKILL, out of memory, a segfault in native code) raises :class:`WorkerDiedError`, or with
     ``report_deaths`` yields ``("died", (index_in_items, reason))`` while the other items go on.
+    ``numerics`` (:mod:`mani_skill_softvt.numerics`): the numerics the work items run under; None,
+    this process's (the pins, unless ``SOFTVT_NUMERICS`` chose otherwise).
     """
     if not items:
         return iter(())
     if ray_address is None:
-        return _run_local(fn, items, workers, report_deaths)
-    return _run_ray(fn, items, ray_address, report_deaths)
+        return _run_local(fn, items, workers, report_deaths, numerics or chosen().name)
+    return _run_ray(fn, items, ray_address, report_deaths, numerics or chosen().name)
 
 
 def init_ray(address: str):
@@ -138,7 +142,7 @@ class _TaggedQueue:
 
 
 def _run_local(fn: Callable, items: Sequence[tuple], workers: int,
-               report_deaths: bool) -> Iterator[tuple[str, object]]:
+               report_deaths: bool, numerics: str) -> Iterator[tuple[str, object]]:
     # One process per work item rather than a ProcessPoolExecutor: a pool that loses a process is
     # broken for every item still queued, and its Manager process outlives a killed parent. Here a
     # dead process costs only its own item, and every child dies with the parent (see _exit_with_parent).
@@ -151,7 +155,7 @@ def _run_local(fn: Callable, items: Sequence[tuple], workers: int,
             while waiting and len(running) < workers:
                 index, args = waiting.pop()
                 p = ctx.Process(target=_child, args=(fn, index, args, queue, os.getpid()))
-                with _one_blas_thread():
+                with _worker_environment(numerics):
                     p.start()
                 running[index] = p
             try:
@@ -190,17 +194,26 @@ def _run_local(fn: Callable, items: Sequence[tuple], workers: int,
 
 
 @contextmanager
-def _one_blas_thread():
-    """The environment a spawned worker starts with (it reads it as it imports numpy): one BLAS
-    and OpenMP thread unless the caller chose otherwise; this process's own is restored after."""
+def _worker_environment(numerics: str):
+    """The environment a spawned worker starts with (it reads it as it imports numpy and torch): one
+    BLAS and OpenMP thread unless the caller chose otherwise, and the variables of ``numerics``
+    (:func:`mani_skill_softvt.numerics.environment`); this process's own is restored after."""
     with _ENV_LOCK:
-        unset = [v for v in WORKER_THREAD_VARS if v not in os.environ]
-        os.environ.update({v: "1" for v in unset})
+        wanted = {**{v: "1" for v in WORKER_THREAD_VARS if v not in os.environ}, **environment(numerics)}
+        saved = {v: os.environ.get(v) for v in wanted}
         try:
+            _set_environ(wanted)
             yield
         finally:
-            for v in unset:
-                os.environ.pop(v, None)
+            _set_environ(saved)
+
+
+def _set_environ(values: dict[str, str | None]) -> None:
+    for var, value in values.items():
+        if value is None:
+            os.environ.pop(var, None)
+        else:
+            os.environ[var] = value
 
 
 def _signal_name(exitcode: int | None) -> str:
@@ -212,7 +225,13 @@ def _signal_name(exitcode: int | None) -> str:
     return ""
 
 
-def _run_ray(fn: Callable, items: Sequence[tuple], address: str, report_deaths: bool) -> Iterator[tuple[str, object]]:
+def _run_ray(fn: Callable, items: Sequence[tuple], address: str, report_deaths: bool,
+             numerics: str) -> Iterator[tuple[str, object]]:
+    env_vars = environment(numerics)
+    if any(v is None for v in env_vars.values()):
+        # A Ray worker inherits the raylet's variables, and runtime_env can set but not unset one.
+        raise ValueError(f"numerics {numerics!r} unpin some of the CPU dispatch, which Ray workers cannot do: "
+                         "run it locally (without --ray)")
     ray = init_ray(address)
     from ray.exceptions import WorkerCrashedError
     from ray.util.queue import Queue
@@ -220,7 +239,8 @@ def _run_ray(fn: Callable, items: Sequence[tuple], address: str, report_deaths: 
     # num_cpus=0: the queue actor must not take a CPU that a work item could use.
     queue = Queue(actor_options={"num_cpus": 0})
     # max_retries=0: a retried item would put its records twice; fail loudly as locally instead.
-    remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+    # The pins reach a Ray worker through its runtime_env, set before it imports anything.
+    remote = ray.remote(num_cpus=1, max_retries=0, runtime_env={"env_vars": env_vars})(fn)
     index_of = {remote.remote(*args, queue): i for i, args in enumerate(items)}
     pending = list(index_of)
     try:

@@ -15,6 +15,7 @@ from importlib import metadata
 import cv2
 import torch
 
+from .numerics import chosen, resolved
 from .version import __version__
 
 # The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
@@ -95,6 +96,9 @@ def _stack() -> tuple[tuple[str, str | None], ...]:
     return tuple(out.items())
 
 
+MACHINE_KEYS = ("cpu", "cpu-isa")  # what names the machine's kind; under pinned numerics it does not choose the bits
+
+
 def software_stack() -> dict[str, str | None]:
     """``{"python": ..., "mani-skill-softvt": ..., "torch": ..., "opencv": ..., ...}`` of this process
     (a new dict each call: records do not share one)."""
@@ -114,3 +118,26 @@ def stack_differences(recorded: dict | None, current: dict) -> list[str]:
 def unrecorded(differences: list[str]) -> list[str]:
     """The keys of :func:`stack_differences` that the record lacks (the rest are real mismatches)."""
     return [d.removesuffix(" unrecorded") for d in differences if d.endswith(" unrecorded")]
+
+
+def main(argv=None) -> None:
+    """``python -m mani_skill_softvt.stack``: the stack and the numerics a record made here would name.
+    ``--export`` prints the pinning variables as shell exports instead, for a process that loads NumPy
+    or torch before this package (the LeRobot stack's ``lerobot-eval``):
+    ``eval "$(python -m mani_skill_softvt.stack --export)"`` pins it in full."""
+    import argparse
+    import json
+    import shlex
+
+    ap = argparse.ArgumentParser(description="the stack and numerics a record made here would name")
+    ap.add_argument("--export", action="store_true", help="print the pinning variables as shell exports")
+    args = ap.parse_args(argv)
+    if args.export:
+        for var, value in sorted(chosen().environment().items()):
+            print(f"export {var}={shlex.quote(value)}")
+        return
+    print(json.dumps({"stack": software_stack(), "numerics": resolved()}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

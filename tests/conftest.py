@@ -2,6 +2,10 @@
 
 import pytest
 
+# Before any test module loads NumPy or torch: the package's import pins their CPU dispatch
+# (mani_skill_softvt/numerics.py), so the tests run under the numerics every record names.
+import mani_skill_softvt  # noqa: F401
+
 
 @pytest.fixture(scope="session")
 def soft_cube_expert_run(tmp_path_factory):

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fileio import append_jsonl, file_sha256
+from ..numerics import numerics_of, resolved
 from ..observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
 from ..rollout import Observer, rollout
@@ -114,7 +115,7 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
     receipt = {"youngs_modulus": None if e is None else float(e), "mass": float(material["mass"]),
                "light_intensity": u.live_light_intensity(), "calibration_card_sha256": env.calibration_card.sha256,
                "package_version": __version__, "policy": policy_name, "privileged": privileged,
-               "stack": software_stack()}
+               "stack": software_stack(), "numerics": resolved()}
     success = termination == "success"
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")},
            "policy": policy_spec or receipt["policy"], "obs_mode": u.obs_mode, "control_mode": u.control_mode,
@@ -135,7 +136,8 @@ def worker_died_record(episode: dict, reason: str, run: RunConfig, rigid: bool) 
     rec = {**{k: episode[k] for k in ("suite", "task_id", "condition", "seed")}, **run.record_fields(),
            "termination": "worker_died", "error": reason, "success": False, "dsr_success": False, "dropped": False,
            "steps": None, "r_max": None, "collapsed_steps": None, "tau_o": None, "rigid": rigid, "deformation_trace": [],
-           "wall_s": None, "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack()}}
+           "wall_s": None, "receipt": {"package_version": __version__, "privileged": False, "stack": software_stack(),
+                       "numerics": resolved()}}
     if run.policy.sha256 is not None:  # kept only for policy files, as in run_episode
         rec["policy_sha256"] = run.policy.sha256
     return seal(rec)
@@ -158,14 +160,15 @@ def _worker(batch: list[dict], run: RunConfig, queue) -> int:
 
 
 def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, workers: int = 1, progress=None,
-             ray_address: str | None = None) -> list[dict]:
+             ray_address: str | None = None, numerics: str | None = None) -> list[dict]:
     """Run the episodes of ``run`` (or ``episodes``, e.g. a reproduction's) not yet in ``out`` and
     return every record of them.
 
     Only records of the same run (:meth:`RunConfig.record_fields` and the policy file's SHA-256)
     count as done. The records file is read once; new records are appended as they come.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
-    local processes ("local", "auto" or "ray://host:port"); the records are the same.
+    local processes ("local", "auto" or "ray://host:port"); the records are the same. ``numerics``:
+    the numerics the episodes run under (:mod:`mani_skill_softvt.numerics`; None: this process's).
     """
     out = Path(out)
     episodes = run.episodes() if episodes is None else episodes
@@ -181,7 +184,8 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
             batches[(ep["suite"], ep["task_id"])].append(ep)
         items = [(b, run) for b in batches.values()]
         in_flight, deaths = {}, 0
-        for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True):
+        for kind, value in run_tasks(_worker, items, workers, ray_address, report_deaths=True,
+                                             numerics=numerics):
             if kind == "message":
                 tag, payload = value
                 key = (payload["suite"], payload["task_id"])
@@ -210,9 +214,9 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
 
 RUN_FIELDS = ("policy", "obs_mode", "control_mode", "camera_size", "policy_sha256")  # what names a run
 NOT_REPRODUCED = ("wall_s", "record_sha256")  # the wall time differs run to run, and with it the hash
-# The stack a record names is not a result: a reproduction on another stack reports it as the reason
-# its bits may differ (evaluate --reproduce), not as a difference of the episode.
-NOT_COMPARED_IN_RECEIPT = ("stack",)
+# The stack and numerics a record names are not results: a reproduction on another stack reports them
+# as the reason its bits may differ (evaluate --reproduce), not as a difference of the episode.
+NOT_COMPARED_IN_RECEIPT = ("stack", "numerics")
 
 
 def record_differences(stored: dict, new: dict) -> list[str]:
@@ -264,8 +268,9 @@ def single_run(records: list[dict], path: Path) -> str | None:
 def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
               progress=None) -> list[tuple[dict, dict | None, list[str]]]:
     """Run the first ``per_task`` recorded episodes of each task in ``path`` again (None: all), with
-    the configuration they were recorded with; (stored record, new record, the fields that differ)
-    each.
+    the configuration and the numerics they were recorded with (a record made before the numerics
+    were pinned ran on each library's native dispatch, and is replayed so); (stored record, new
+    record, the fields that differ) each.
 
     Refuses before running anything if the file holds several runs, or if the policy file is not
     the one the records were made with (its ``policy_sha256``)."""
@@ -294,7 +299,7 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
     with tempfile.TemporaryDirectory(prefix="reproduce-") as tmp:
         new = evaluate(run, Path(tmp) / "records.jsonl",
                        [{k: r[k] for k in ("suite", "task_id", "condition", "seed")} for r in chosen], workers,
-                       progress=progress)
+                       progress=progress, numerics=numerics_of(first))
     by_key = {episode_key(r): r for r in new}
     return [(r, by_key.get(episode_key(r)),
              record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])

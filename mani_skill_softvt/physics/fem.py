@@ -34,8 +34,9 @@ from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
 
-import warp as wp  # noqa: E402
+from ..numerics import configure_warp  # noqa: E402
 
+wp = configure_warp()  # the kernels compile for the pinned target, not the host (numerics.py)
 # Warp logs every kernel-module load and its init banner at INFO: commands print only their own output.
 wp.config.log_level = wp.LOG_WARNING
 wp.config.kernel_cache_dir = os.environ["WARP_CACHE_PATH"]

@@ -1,0 +1,106 @@
+"""Same bits on any x86-64 machine: the numerics are pinned (mani_skill_softvt/numerics.py), and what
+the benchmark computes under them matches the committed golden fingerprints.
+
+The goldens (tests/golden/fingerprints.json) were made under the pins on one machine kind and name
+the kinds they have passed on. A failure here on another kind means some dispatch is still the
+host's: the message says which part of the computation (physics, cameras, touch, policy) moved.
+"""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from mani_skill_softvt import fingerprints as F
+from mani_skill_softvt import numerics as N
+from mani_skill_softvt.parallel import run_tasks
+
+GOLDEN = json.loads((Path(__file__).parent / "golden" / "fingerprints.json").read_text())
+
+
+def _pinned_variables(queue):
+    return N.chosen().name, {v: os.environ.get(v) for v in ("ATEN_CPU_CAPABILITY", "OPENBLAS_CORETYPE")}, \
+        N.resolved()["torch_cpu_capability"]
+
+
+# ------------------------------------------------------------------------------------ the choice
+
+
+def test_numerics_names_parse_and_bad_ones_say_what_to_write():
+    assert N.parse("x86-64-v3").parts == tuple(N.PARTS)
+    assert N.parse("native").parts == () and N.parse("native").warp_cpu_compiler_flags is None
+    assert N.parse("x86-64-v3:warp,aten").parts == ("warp", "aten")
+    assert N.parse("x86-64-v3:aten").warp_cpu_compiler_flags is None
+    with pytest.raises(ValueError, match="SOFTVT_NUMERICS='avx512'.*'x86-64-v3'"):
+        N.parse("avx512")
+    with pytest.raises(ValueError, match="unknown part.*blas"):
+        N.parse("x86-64-v3:blas")
+
+
+def test_the_package_import_pinned_this_process_and_every_library_took_it():
+    got = N.resolved()
+    assert got["name"] == N.PINNED and got["pinned"], got
+    assert got["warp_cpu_compiler_flags"] == N.WARP_PINNED_FLAGS and "-march=native" not in got["warp_cpu_compiler_flags"]
+    assert got["torch_cpu_capability"] == "AVX2" and not got["numpy_avx512"] and not got["opencv_avx512"]
+    assert got["openblas_core"] == "Haswell"
+
+
+def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch):
+    (pinned,) = [v for k, v in run_tasks(_pinned_variables, [()], 1) if k == "result"]
+    assert pinned == ("x86-64-v3", {"ATEN_CPU_CAPABILITY": "avx2", "OPENBLAS_CORETYPE": "Haswell"}, "AVX2")
+    # A record made before the pins replays under each library's own choice, whatever this process has.
+    (native,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="native") if k == "result"]
+    assert native[:2] == ("native", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": None})
+    assert os.environ["ATEN_CPU_CAPABILITY"] == "avx2"  # this process's own pins are as they were
+
+
+def test_a_record_names_its_numerics_and_a_reproduction_is_told_about_the_machine():
+    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
+    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
+    old = {"receipt": {"stack": epyc}}  # made before the pins, on a machine that set OPENBLAS_CORETYPE
+    assert N.numerics_of(old) == "x86-64-v3:openblas" and N.numerics_of({"receipt": {"stack": xeon}}) == "native"
+    assert "of the kind that made them" in N.reproduction_note(old, {**epyc, "cpu-isa": "AVX2 avx512_bf16 avx512f avx2 fma "
+                                                                       "onednn_max=AVX2"})
+    assert "their outcomes may differ here" in N.reproduction_note(old, xeon)
+    assert "do not name their machine" in N.reproduction_note({"receipt": {}}, xeon)
+    pinned = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True}}}
+    assert N.numerics_of(pinned) == "x86-64-v3" and N.reproduction_note(pinned, xeon) is None
+
+
+# ------------------------------------------------------------------------------------ goldens
+
+
+def _same(case: str, got: dict, parts=("episode",)) -> None:
+    want = GOLDEN["cases"][case]
+    moved = [p for p in parts if got[p] != want[p]]
+    assert not moved, (f"{case}: {', '.join(moved)} differ from the goldens made on {GOLDEN['made_on']} under "
+                       f"{GOLDEN['numerics']} (passed on {'; '.join(GOLDEN['passed_on'])}): some CPU dispatch is "
+                       "not pinned on this machine, or the code changed what it computes (then regenerate: "
+                       "scripts/fingerprint.py --golden tests/golden/fingerprints.json)")
+
+
+def test_goldens_were_made_under_the_pins_this_package_sets():
+    assert GOLDEN["numerics"] == N.PINNED and GOLDEN["warp_cpu_compiler_flags"] == N.WARP_PINNED_FLAGS
+
+
+def test_the_tactile_frame_is_the_golden_one():
+    _same("tactile_frame", F.tactile_frame(), ("pressure", "rigid", "geometric", "episode"))
+
+
+def test_a_committed_policys_action_chunk_is_the_golden_one():
+    _same("dp_inference", F.dp_inference())
+
+
+def test_training_a_small_diffusion_policy_gives_the_golden_weights():
+    got = F.dp_training()
+    _same("dp_training", got, ("losses", "weights", "episode"))
+
+
+@pytest.mark.parametrize("case", ["expert_soft", "expert_rigid"])
+def test_an_expert_episode_is_the_golden_one(case):
+    _same(case, F.CASES[case](), ("states", "rgb", "tactile", "episode"))
+
+
+def test_a_committed_policys_first_id_episode_is_the_golden_one():
+    _same("record", F.CASES["record"](), ("steps", "r_max", "termination", "episode"))

@@ -1,0 +1,121 @@
+"""The pre-registered seed-level rule (evaluation/seed_level.py, docs/preregistration.md) and its command."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from mani_skill_softvt import compare as cli
+from mani_skill_softvt.evaluation import seed_level as S
+from mani_skill_softvt.evaluation.records import seal
+from mani_skill_softvt.studies import rule_check
+
+
+def test_pooled_variance_is_the_within_recipe_variance_with_its_degrees_of_freedom():
+    var, df = S.pooled_variance([90.2, 73.0], [90.2, 89.8], [50.0])  # a lone seed adds nothing
+    assert df == 2
+    assert var == pytest.approx(((90.2 - 81.6) ** 2 * 2 + (0.2 ** 2) * 2) / 2)
+    assert S.pooled_variance([1.0], [2.0]) == (None, 0)
+
+
+def test_the_interval_is_students_t_on_the_seed_means():
+    a, b = [70.0, 74.0, 78.0], [80.0, 84.0, 88.0]
+    c = S.compare_seeds(a, b)
+    se = math.sqrt(16.0 * (1 / 3 + 1 / 3))  # pooled variance 16, three seeds a side
+    t = stats.t.ppf(0.975, 4)
+    assert c.difference == pytest.approx(10.0) and c.df == 4 and c.se == pytest.approx(se)
+    assert c.ci95 == pytest.approx((10 - t * se, 10 + t * se))
+    # A family's variance (more recipes, more degrees of freedom) narrows it.
+    wide = S.compare_seeds(a, b, (16.0, 12))
+    assert wide.ci95[1] - wide.ci95[0] < c.ci95[1] - c.ci95[0]
+    # An interaction of four recipes: its variance sums the four.
+    inter = S.contrast([a, b, a, b], [1, -1, -1, 1])
+    assert inter.difference == pytest.approx(0.0) and inter.se == pytest.approx(math.sqrt(16.0 * 4 / 3))
+
+
+def test_one_seed_a_side_is_unresolved_whatever_the_difference():
+    c = S.compare_seeds([50.0], [95.0])
+    assert c.ci95 is None and S.verdict(c, paper=10.0) == S.UNRESOLVED
+
+
+def _c(lo, hi, lo90=None, hi90=None):
+    mid = (lo + hi) / 2
+    return S.Comparison(mid, 3, 3, 1.0, 4, (lo, hi), (lo90 if lo90 is not None else lo + 1, hi90 if hi90 is not None else hi - 1))
+
+
+def test_verdicts_follow_the_registered_rule():
+    assert S.verdict(_c(2, 12), paper=10) == S.SUPPORTED  # excludes 0 on the paper's side
+    assert S.verdict(_c(-12, -2), paper=-10) == S.SUPPORTED
+    assert S.verdict(_c(-12, -2), paper=10) == S.CONTRADICTED  # sign claim: the other sign
+    assert S.verdict(_c(-20, 25), paper=10) == S.UNRESOLVED  # holds 0 and the paper's effect
+    # A claim of a size: an interval below the paper's effect that holds 0 contradicts the size.
+    assert S.verdict(_c(-6, 4), paper=11.4, claim="size") == S.CONTRADICTED
+    assert S.verdict(_c(-6, 4), paper=11.4, claim="sign") == S.UNRESOLVED  # absence of evidence
+    assert S.verdict(_c(2, 6), paper=11.4, claim="size") == S.SUPPORTED
+    assert S.size_note(_c(2, 6), 11.4) == "smaller than the paper's"
+    # Equivalence: the 90 % interval within +-5 points, the margin fixed beforehand.
+    assert S.verdict(_c(-5, 5, -4, 4), paper=0, claim="none") == S.SUPPORTED
+    assert S.verdict(_c(-5, 5, -4, 4), paper=10, claim="sign") == S.EQUIVALENT
+    assert S.verdict(_c(1, 9), paper=0, claim="none") == S.CONTRADICTED
+    assert S.verdict(_c(-9, 9, -7, 7), paper=0, claim="none") == S.UNRESOLVED
+    with pytest.raises(ValueError, match="claim='none'"):
+        S.verdict(_c(1, 2), paper=0)
+
+
+def test_a_finding_is_read_from_its_parts_and_an_unresolved_part_never_contradicts_it():
+    assert S.finding_verdict([S.SUPPORTED, S.SUPPORTED]) == S.SUPPORTED
+    assert S.finding_verdict([S.SUPPORTED, S.UNRESOLVED]) == "partly supported"
+    assert S.finding_verdict([S.UNRESOLVED, S.UNRESOLVED]) == S.UNRESOLVED
+    assert S.finding_verdict([S.CONTRADICTED, S.UNRESOLVED]) == S.CONTRADICTED
+    assert S.finding_verdict([S.SUPPORTED, S.CONTRADICTED]) == "mixed"
+
+
+def test_power_grows_with_seeds_and_a_five_point_difference_needs_many():
+    mdd = [S.minimum_detectable(8.6, n) for n in (2, 3, 5, 10)]
+    assert all(a > b for a, b in zip(mdd, mdd[1:]))
+    # Large-sample check: (z_0.975 + z_0.8) * sd * sqrt(2 / n) at n = 200 seeds.
+    assert S.minimum_detectable(8.6, 200) == pytest.approx(2.80 * 8.6 * math.sqrt(2 / 200), rel=0.01)
+    n = S.seeds_needed(8.6, 5.0)
+    assert S.minimum_detectable(8.6, n) <= 5.0 < S.minimum_detectable(8.6, n - 1)
+
+
+def test_the_rule_calls_a_difference_about_five_percent_of_the_time_when_there_is_none():
+    # 600 synthetic null comparisons at three seeds a side: the two-sided 95 % interval excludes 0 in
+    # 5 % of them (binomial sd 0.9 %), the seed-score noise being normal plus binomial episodes.
+    rates = rule_check.verdict_rates(3, 0.0, 8.6, 600, family=False, seed=1)
+    called = rates[S.SUPPORTED] + rates[S.CONTRADICTED]
+    assert 0.05 - 3 * 0.009 < called < 0.05 + 3 * 0.009
+    # And a large true effect in the paper's direction is supported most of the time at five seeds.
+    assert rule_check.verdict_rates(5, 25.0, 8.6, 200, family=True, seed=1)[S.SUPPORTED] > 0.9
+
+
+def _records(path, outcomes, policy="p"):
+    lines = []
+    for i, (success, dsr) in enumerate(outcomes):
+        rec = seal({"suite": "object_soft", "task_id": i % 2, "condition": "id", "seed": 50_000_000 + i, "policy": policy,
+                    "success": success, "dsr_success": dsr, "termination": "success" if success else "timeout"})
+        lines.append(json.dumps(rec))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_the_command_compares_seed_files_and_refuses_an_edited_one_in_one_line(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    files = {}
+    for side, p in (("a", 0.5), ("b", 0.9)):
+        for s in range(2):
+            files.setdefault(side, []).append(_records(tmp_path / f"{side}{s}.jsonl",
+                                                       [(bool(x), bool(x)) for x in rng.random(40) < p]))
+    out = cli.main(["--a", *map(str, files["a"]), "--b", *map(str, files["b"]), "--paper", "10"])
+    assert "40 shared episodes" in out and "tsr: A seeds" in out and "P(B beats A)" in out
+    sub = cli.subset(cli.load_runs(files["a"]), 5)
+    assert len(sub) == 10 and {k[1] for k in sub} == {0, 1}
+    edited = files["a"][0].read_text().replace('"success": true', '"success": false', 1)
+    files["a"][0].write_text(edited)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--a", *map(str, files["a"]), "--b", *map(str, files["b"])])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{files['a'][0]}:" in err and "record_sha256" in err
