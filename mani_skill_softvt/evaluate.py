@@ -26,6 +26,8 @@ from tqdm import tqdm
 
 from .calibration.cards import load_calibration_card
 from .evaluation.metrics import rescore_record
+from .evaluation.protocols import PROTOCOLS
+from .evaluation.provenance import sidecar
 from .evaluation.records import RecordIntegrityError, read_records
 from .evaluation.report import plot_ood_curves, plot_traces, write_report
 from .evaluation.run import DEFAULT_TASKS, RunConfig
@@ -41,7 +43,9 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.evaluate", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
-    ap.add_argument("--protocol", default="id", choices=["id", "ood"])
+    ap.add_argument("--protocol", default="id", choices=list(PROTOCOLS),
+                    help="id (the paper's), ood (its nine conditions), side_swap (Spatial suites: the ID episode "
+                         "with the instruction naming the other instance; not the paper's)")
     ap.add_argument("--policy", default="expert",
                     help="expert | expert_cartesian | hold | random | module:Class (imports and runs that code "
                          "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "
@@ -137,10 +141,11 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         named = [f if gap is None else f"{f} (by at most {gap:.1e} relative)" for f, gap in gaps]
         print(f"{where}: {'differs in ' + ', '.join(named) if fields else 'the same, bit for bit'}")
     named = bool(results) and bool(results[0][0]["receipt"].get("numerics"))
+    known = sidecar(path)
     print(f"{len(results) - len(differing)} of {len(results)} episodes of {path} reproduced (numerics "
-          f"{numerics_of(results[0][0]) if results else '-'}, "
+          f"{numerics_of(results[0][0], known) if results else '-'}, "
           f"{'as the records name them' if named else 'as machines of their kind ran before the pins'})")
-    note = reproduction_note(results[0][0], software_stack()) if results else None
+    note = reproduction_note(results[0][0], software_stack(), known) if results else None
     if note:
         print(note)
     other = stack_differences(results[0][0]["receipt"].get("stack"), software_stack()) if results else []

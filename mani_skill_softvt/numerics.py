@@ -119,6 +119,7 @@ def chosen(environ=None) -> Numerics:
 ORIGINAL_ENV = "SOFTVT_NUMERICS_ORIGINAL"
 _ORIGINAL: dict[str, str | None] = {}
 _LOADED_BEFORE: list[str] = []  # libraries that read their dispatch as they load, loaded before pin()
+_RELEASED: set[str] = set()  # parts this process gave back to the library's own dispatch (release)
 
 
 def _pinning_variables() -> list[str]:
@@ -142,6 +143,24 @@ def pin(environ=None) -> Numerics:
     for var, value in numerics.environment().items():
         environ[var] = value
     return numerics
+
+
+def release(part: str) -> None:
+    """Give ``part`` back to its library's own dispatch in this process (the variables as the shell
+    had them), where the library has not chosen yet: oneDNN chooses at its first primitive, so a
+    bfloat16 training releases ``onednn`` before its first step (pinned to AVX2, oneDNN emulates
+    bfloat16 and a training step costs 23x; docs/benchmarks.md). What the process then computes holds
+    on machines of its kind only, and :func:`resolved` says so (``released``, ``pinned`` false)."""
+    if part not in PARTS:
+        raise ValueError(f"unknown part {part!r}; parts are {', '.join(PARTS)}")
+    for var in PARTS[part]:
+        original = _ORIGINAL.get(var)
+        if original is None:
+            os.environ.pop(var, None)
+        else:
+            os.environ[var] = original
+    _RELEASED.add(part)
+    resolved.cache_clear()
 
 
 def environment(numerics: Numerics | str) -> dict[str, str | None]:
@@ -203,7 +222,8 @@ def resolved() -> dict:
             "aten": out["torch_cpu_capability"] in ("AVX2", "DEFAULT"),
             "numpy": not out["numpy_avx512"], "opencv": not out["opencv_avx512"],
             "openblas": out["openblas_core"] in (None, "Haswell")}
-    out["pinned"] = all(took.get(p, True) for p in numerics.parts) and bool(numerics.parts)
+    out["released"] = sorted(_RELEASED)
+    out["pinned"] = all(took.get(p, True) for p in numerics.parts) and bool(numerics.parts) and not _RELEASED
     return out
 
 
@@ -220,13 +240,15 @@ def loaded_before_pin() -> list[str]:
 LEGACY_NUMERICS = {"AMD EPYC": f"{PINNED}:openblas"}
 
 
-def numerics_of(record: dict) -> str:
+def numerics_of(record: dict, known: dict | None = None) -> str:
     """The numerics a record was made under: the name its receipt gives; for a record from before the
-    numerics were pinned, the machine's native dispatch as that kind of machine had it
-    (:data:`LEGACY_NUMERICS`), ``native`` where unknown."""
+    numerics were pinned, what ``known`` (its file's provenance sidecar entry) says, else the machine's
+    native dispatch as that kind of machine had it (:data:`LEGACY_NUMERICS`), ``native`` where unknown."""
     receipt = record.get("receipt") or {}
     if receipt.get("numerics"):
         return receipt["numerics"]["name"]
+    if known and known.get("numerics"):
+        return known["numerics"]
     return LEGACY_NUMERICS.get((receipt.get("stack") or {}).get("cpu"), NATIVE)
 
 
@@ -238,14 +260,17 @@ def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:
     return stack.get("cpu"), tuple(w for w in isa[1:] if not w.startswith("onednn_max="))
 
 
-def reproduction_note(record: dict, stack: dict) -> str | None:
+def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> str | None:
     """What a reproduction of ``record`` on a machine of ``stack`` (:func:`mani_skill_softvt.stack.software_stack`)
     should be told about its numerics: None when its numerics are pinned in full (they hold on any
-    x86-64 machine); else whether this machine is of the kind that made it."""
+    x86-64 machine); else whether this machine is of the kind that made it (``known``: its file's
+    provenance sidecar entry, for a record that does not name its machine)."""
     numerics = (record.get("receipt") or {}).get("numerics")
     if numerics and numerics.get("pinned"):
         return None
     made = (record.get("receipt") or {}).get("stack") or {}
+    if not made.get("cpu") and known and known.get("cpu"):
+        made = {"cpu": known["cpu"], "cpu-isa": known.get("cpu-isa")}
     how = ("made before the numerics were pinned" if not numerics else
            f"made with numerics {numerics.get('name')!r}, not pinned in full")
     if not made.get("cpu"):

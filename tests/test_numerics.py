@@ -24,6 +24,12 @@ def _pinned_variables(queue):
         N.resolved()["torch_cpu_capability"]
 
 
+def _released_onednn(queue):
+    N.release("onednn")
+    got = N.resolved()
+    return os.environ.get("ONEDNN_MAX_CPU_ISA"), got["released"], got["pinned"], os.environ.get("ATEN_CPU_CAPABILITY")
+
+
 # ------------------------------------------------------------------------------------ the choice
 
 
@@ -53,6 +59,14 @@ def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch)
     (native,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="native") if k == "result"]
     assert native[:2] == ("native", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": None})
     assert os.environ["ATEN_CPU_CAPABILITY"] == "avx2"  # this process's own pins are as they were
+
+
+def test_a_bfloat16_training_releases_onednn_alone_and_says_so():
+    # In a process of its own (oneDNN chooses once per process): the shell had no ONEDNN_MAX_CPU_ISA.
+    (got,) = [v for k, v in run_tasks(_released_onednn, [()], 1) if k == "result"]
+    assert got == (None, ["onednn"], False, "avx2")
+    with pytest.raises(ValueError, match="unknown part"):
+        N.release("blas")
 
 
 def test_a_record_names_its_numerics_and_a_reproduction_is_told_about_the_machine():

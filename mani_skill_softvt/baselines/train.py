@@ -35,6 +35,8 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from ..fileio import atomic_write
+from ..numerics import chosen as chosen_numerics
+from ..numerics import release, resolved
 from ..paths import DEMOS_DIR, REPO_DIR
 from ..tasks.suites import get_suite
 from .config import (
@@ -156,7 +158,8 @@ class Training:
                 "tactile_model": get_suite(self.cfg.suite).tactile_model if self.cfg.tactile else None,
                 "episodes": windows.episodes, "samples": len(windows),
                 "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s,
-                "data_key": windows.key, "data_cache": None if windows.cache is None else str(windows.cache.resolve())}
+                "data_key": windows.key, "data_cache": None if windows.cache is None else str(windows.cache.resolve()),
+                "numerics": resolved()}
 
 
 def save(path: Path, obj: dict) -> None:
@@ -278,6 +281,12 @@ def main(argv=None) -> Path:
         ap.error(str(e))
     out = args.out or default_out(cfg, args.recipe)
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
+    if cfg.precision == "bf16" and "onednn" in chosen_numerics().parts:
+        # Pinned to AVX2, oneDNN emulates bfloat16 and a step costs 23x (docs/benchmarks.md): the training
+        # takes the CPU's own bfloat16 kernels, and its weights reproduce on machines of this kind.
+        release("onednn")
+        print("note: bfloat16 training runs oneDNN's own CPU dispatch (the pinned AVX2 one costs 23x a step); "
+              "the weights reproduce on machines of this kind, the evaluations of the policy on any")
     path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache)
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
     return path

@@ -74,6 +74,23 @@ def tolerance_violated(record: dict) -> bool:
     return record.get("r_max") is not None and float(record["r_max"]) > 1.0
 
 
+# An instance whose centroid ended more than this far from where its episode began was disturbed: a
+# resting object sleeps and drifts far less (docs/physics.md), a push or a grasp moves it further.
+DISTURBED_M = 0.02
+
+
+def instance_outcomes(records: list[dict]) -> dict | None:
+    """In Spatial records (which name ``instructed_instance``): episodes that ended with the other
+    instance on the target (``wrong_instance``: carried there instead of, or beside, the instructed
+    one) and episodes in which both instances were disturbed (moved by more than :data:`DISTURBED_M`).
+    None for records without them (Object suites, or records made before they were kept)."""
+    spatial = [r for r in records if "instructed_instance" in r and r.get("instance_displacement")]
+    if not spatial:
+        return None
+    return {"episodes": len(spatial), "wrong_instance": sum(bool(r["other_in_target"]) for r in spatial),
+            "both_disturbed": sum(all(d > DISTURBED_M for d in r["instance_displacement"].values()) for r in spatial)}
+
+
 def summarize(records: list[dict]) -> dict:
     """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals; how the
     episodes ended (``terminations``) and how many violated their tolerance.
@@ -101,6 +118,7 @@ def summarize(records: list[dict]) -> dict:
         "tolerance_violations": sum(tolerance_violated(r) for r in records),
         "collapses": sum(collapsed(r) for r in records),
         "terminations": dict(sorted(terminations.items())),
+        "instances": instance_outcomes(records),
     }
 
 

@@ -2,13 +2,25 @@
 
 ID: fixed held-out initial states per task (seeds from :mod:`mani_skill_softvt.data.seeds`,
 disjoint from the training seeds); OOD episodes reuse the ID task, seed and therefore initial
-state, with one physical factor changed.
+state, with one physical factor changed. Side swap (not the paper's; Spatial suites): the ID
+episode with the instruction naming the other instance, success requiring that one.
 """
 
 from __future__ import annotations
 
 from ..data.seeds import ID_EPISODES_PER_TASK, id_seed
 from ..tasks.suites import NUM_TASKS, OOD_CONDITIONS, get_suite
+
+PROTOCOLS = ("id", "ood", "side_swap")
+SIDE_SWAP = "side_swap"  # the condition of the side-swap protocol's episodes
+
+
+def reset_options(condition: str) -> dict:
+    """The env's reset options for an episode of ``condition``: none for ID, ``swap_side`` for the
+    side swap, the OOD condition otherwise."""
+    if condition == "id":
+        return {}
+    return {"swap_side": True} if condition == SIDE_SWAP else {"ood": condition}
 
 
 def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EPISODES_PER_TASK,
@@ -25,8 +37,12 @@ def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EP
         unknown = [c for c in conds if c not in OOD_CONDITIONS]
         if unknown:
             raise ValueError(f"unknown OOD conditions {unknown}; choose from {sorted(OOD_CONDITIONS)}")
+    elif protocol == SIDE_SWAP:
+        if get_suite(suite).layout != "spatial":
+            raise ValueError(f"the side swap applies to the Spatial suites (two instances), not '{suite}'")
+        conds = [SIDE_SWAP]
     else:
-        raise ValueError(f"protocol must be 'id' or 'ood', got '{protocol}'")
+        raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got '{protocol}'")
     return [{"suite": suite, "task_id": t, "condition": c, "seed": id_seed(t, i)}
             for c in conds for t in tasks for i in range(per_task)]
 

@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 from ..fileio import atomic_write, atomic_write_json
 from ..physics.constants import CONTROL_FREQ
 from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
-from .metrics import deformation_ratio, group_summaries, percent, percent_ci, summarize
+from .metrics import DISTURBED_M, deformation_ratio, group_summaries, percent, percent_ci, summarize
 from .runner import TERMINATIONS
 
 
@@ -43,6 +43,13 @@ def build_report(records: list[dict]) -> tuple[str, dict]:
     lines = ["## Overall", HEADER, _row("all", data["overall"]), "", "## Per suite", HEADER]
     lines += [_row(k, v) for k, v in data["per_suite"].items()]
     lines += ["", "## How episodes ended", *_termination_table({"all": data["overall"], **data["per_suite"]})]
+    spatial = {k: v["instances"] for k, v in data["per_suite"].items() if v.get("instances")}
+    if spatial:
+        lines += ["", "## Which instance (Spatial suites)",
+                  f"| suite | episodes | the other instance on the target | both instances disturbed "
+                  f"(> {100 * DISTURBED_M:g} cm) |",
+                  "|---|---|---|---|"]
+        lines += [f"| {k} | {v['episodes']} | {v['wrong_instance']} | {v['both_disturbed']} |" for k, v in spatial.items()]
     lines += ["", "## Per task", HEADER] + [_row(k, v) for k, v in data["per_task"].items()]
     if len(data["per_condition"]) > len(data["per_suite"]):
         lines += ["", "## Per condition", HEADER] + [_row(k, v) for k, v in data["per_condition"].items()]

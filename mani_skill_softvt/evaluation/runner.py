@@ -45,7 +45,8 @@ from ..rollout import Observer, rollout
 from ..stack import software_stack
 from ..tasks.suites import get_suite
 from ..version import __version__
-from .protocols import episode_key
+from .protocols import episode_key, reset_options
+from .provenance import sidecar
 from .records import read_records, seal
 from .run import RunConfig
 from .wrapper import make_env
@@ -92,7 +93,7 @@ def run_episode(env, policy, episode: dict, replan_steps: int = 8, on_step=None,
         def on_step(self, env, action, obs, info):
             on_step(obs, info)
 
-    options = {} if episode["condition"] == "id" else {"ood": episode["condition"]}
+    options = reset_options(episode["condition"])
     t0 = time.perf_counter()
     # Cameras render only where the policy reads them; a video (on_step) shows every step's.
     ep = rollout(env, policy, int(episode["seed"]), options=options, replan_steps=replan_steps,
@@ -126,6 +127,9 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
            "collapsed_steps": int(env.collapsed_steps),
            "tau_o": env.tau_o, "rigid": env.rigid, "deformation_trace": [float(d) for d in env.deformation_trace],
            "wall_s": None if wall_s is None else round(wall_s, 3), "receipt": receipt}
+    if len(u.object_names) > 1:  # a Spatial scene: which instance was instructed, and what became of the other
+        rec.update(instructed_instance=u.target_instance, other_in_target=info_bool(info, "other_in_target"),
+                   instance_displacement={k: round(float(v), 6) for k, v in env.displacements().items()})
     if policy_sha256 is not None:
         rec["policy_sha256"] = policy_sha256
     return seal(rec)
@@ -299,7 +303,7 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
     with tempfile.TemporaryDirectory(prefix="reproduce-") as tmp:
         new = evaluate(run, Path(tmp) / "records.jsonl",
                        [{k: r[k] for k in ("suite", "task_id", "condition", "seed")} for r in chosen], workers,
-                       progress=progress, numerics=numerics_of(first))
+                       progress=progress, numerics=numerics_of(first, sidecar(path)))
     by_key = {episode_key(r): r for r in new}
     return [(r, by_key.get(episode_key(r)),
              record_differences(r, by_key[episode_key(r)]) if episode_key(r) in by_key else ["(not run)"])

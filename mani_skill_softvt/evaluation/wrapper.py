@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import gymnasium as gym
+import numpy as np
 
 from .. import tasks  # noqa: F401  (registers the envs)
 from ..observations import camera_sensor_configs, info_bool
@@ -37,6 +38,13 @@ class DSRWrapper(gym.Wrapper):
         self.r_max = 0.0
         self.deformation_trace: list[float] = []
         self.collapsed_steps = 0
+        self.start_centroids: dict = {}  # each instance's centroid as the episode began
+
+    def displacements(self) -> dict[str, float]:
+        """How far (m) each instance's centroid is from where the episode began, in a Spatial scene
+        (whether the other instance was disturbed too; empty in an Object scene). Evaluator-only."""
+        u = self.env.unwrapped
+        return {n: float(np.linalg.norm(u.soft_nodes(n).mean(0) - c)) for n, c in self.start_centroids.items()}
 
     def _score(self, info: dict) -> dict:
         u = self.env.unwrapped
@@ -56,6 +64,9 @@ class DSRWrapper(gym.Wrapper):
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
         self.r_max, self.deformation_trace, self.collapsed_steps = 0.0, [], 0
+        u = self.env.unwrapped
+        names = getattr(u, "object_names", ())  # two in a Spatial scene: the other instance is watched too
+        self.start_centroids = {n: u.soft_nodes(n).mean(0) for n in names} if len(names) > 1 else {}
         return obs, self._score(info)
 
     def step(self, action):

@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 
 from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
 from ..evaluation.protocols import episode_key, seed_key
+from ..evaluation.provenance import machine, numerics, sidecar
 from ..evaluation.records import read_records
 from ..evaluation.report import rt_series
 from ..evaluation.run import policy_tag
@@ -220,6 +221,23 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
     return "\n".join(lines) + "\n", {"rows": rows, "comparisons": pairs}
 
 
+def provenance_lines(files: list[tuple[str, list[dict], dict | None]]) -> list[str]:
+    """Where each records file ran (its records' stack and numerics, else its provenance sidecar
+    entry), and a warning when the files cross machines: rows made on different kinds compare by
+    rate, not record by record."""
+    lines = ["", "| records file | machine | numerics | evidence (sidecar) |", "|---|---|---|---|"]
+    kinds = set()
+    for name, recs, entry in files:
+        where = machine(recs, entry)
+        kinds.add(where.removesuffix(" (per sidecar)").split(" (")[0])
+        lines.append(f"| {name} | {where} | {numerics(recs, entry)} | {(entry or {}).get('evidence', '-')} |")
+    if len(kinds - {"unrecorded"}) > 1 or "unrecorded" in kinds and len(kinds) > 1:
+        lines.append(f"\nThese rows cross machines ({'; '.join(sorted(kinds))}): made before the numerics were "
+                     "pinned, the same episode rounds differently on another kind, so compare their rates, not "
+                     "their records (docs/install.md, numerics).")
+    return lines
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.results", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -238,6 +256,8 @@ def main(argv=None) -> dict:
     except ValueError as e:
         ap.error(str(e))
     text, data = build(groups)
+    files = [(p.name, read_records(p), sidecar(p)) for p in [*args.records, *args.legacy]]
+    text += "\n".join(provenance_lines(files)) + "\n"
     out = args.out or (args.records or [args.legacy[0].parent.parent])[0]
     out = out.parent if out.suffix == ".jsonl" else out
     atomic_write(out / "results.md", lambda p: p.write_text(text))

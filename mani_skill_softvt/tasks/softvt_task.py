@@ -50,7 +50,9 @@ reward (``calibration_dir`` to read cards elsewhere). ``normalized_dense``: ``de
 ``none``: 0. **Episode end:** success, drop, or 300 control steps.
 
 **Reset options:** ``ood`` (one of :data:`~mani_skill_softvt.tasks.suites.OOD_CONDITIONS`) or
-the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_modulus_scale``.
+the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_modulus_scale``;
+in the Spatial suites ``swap_side`` (True: the instruction names the other instance and success
+requires that one; the scene, seed and initial state are the ID episode's: the side-swap condition).
 """
 
 from __future__ import annotations
@@ -69,7 +71,7 @@ from . import constants as C
 from . import rewards
 from .robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
 from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
-from .suites import NUM_TASKS, SUITES, TaskSpec, task_spec
+from .suites import NUM_TASKS, SUITES, TaskSpec, swapped_side, task_spec
 
 OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
 
@@ -99,6 +101,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
             raise ValueError(f"gripper_action_version={gripper_action_version!r} (a recorded file's env kwargs): "
                              f"{why.format(path='FILE.h5')}")
         self.task: TaskSpec = task_spec(suite, task_id)
+        self._instructed: TaskSpec = self.task  # the task as this episode instructs it (swap_side: the other side)
         self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self.calibration_dir = CALIBRATION_DIR if calibration_dir is None else calibration_dir
@@ -110,15 +113,27 @@ class SoftVTTaskEnv(SoftBodyEnv):
 
     @property
     def instruction(self) -> str:
-        """The task's language instruction. It belongs to the env and to each recorded episode, not to
+        """The episode's language instruction. It belongs to the env and to each recorded episode, not to
         the observation: ManiSkill's tools (RecordEpisode, replay_trajectory, vector envs' shared memory,
         its baseline loaders) take observations of arrays only."""
-        return self.task.instruction
+        return self._instructed.instruction
 
     @property
     def target_instance(self) -> str:
         """Name of the instructed soft object: "object", or "left"/"right" in Spatial suites."""
-        return self.task.side or "object"
+        return self._instructed.side or "object"
+
+    def reset(self, seed=None, options=None):
+        options = dict(options or {})
+        swap = options.pop("swap_side", False)
+        if not isinstance(swap, bool):
+            raise ValueError(f"reset option swap_side={swap!r}: give True or False")
+        # Checked before the scene is rebuilt, and kept for the episode (the layout draws no side).
+        try:
+            self._instructed = swapped_side(self.task) if swap else self.task
+        except ValueError as e:
+            raise ValueError(f"reset option swap_side: {e}") from None
+        return super().reset(seed=seed, options=options)
 
     # ------------------------------------------------------------------ scene
     def _object_specs(self):

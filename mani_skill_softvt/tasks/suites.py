@@ -7,7 +7,7 @@ Rigid suites reuse the soft suites' layouts and instructions with the rigid twin
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -131,6 +131,16 @@ def task_spec(suite: str, task_id: int) -> TaskSpec:
                         s.target, None, s.rigid)
     return TaskSpec(suite, task_id, asset, soft_id, f"Pick up the {side} {spatial_words} and place it on the plate.",
                     s.target, side, s.rigid)
+
+
+def swapped_side(task: TaskSpec) -> TaskSpec:
+    """A Spatial task with the instruction naming the other instance ("left" <-> "right"), the scene
+    the same: the side-swap condition (not the paper's), which tells whether a policy follows the
+    instruction or the object's looks and place. ValueError for an Object task (one instance)."""
+    if task.side is None:
+        raise ValueError(f"{task.suite} task {task.task_id} has one instance: the side swap applies to the Spatial suites")
+    other = {"left": "right", "right": "left"}[task.side]
+    return replace(task, side=other, instruction=task.instruction.replace(f"the {task.side} ", f"the {other} ", 1))
 
 
 def list_tasks(suite: str) -> list[TaskSpec]:

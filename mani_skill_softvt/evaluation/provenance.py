@@ -1,0 +1,54 @@
+"""What is known of where records were made when they do not say it themselves: the provenance sidecar.
+
+Records are sealed (``record_sha256``), so a record made before the stack, the CPU or the numerics
+were kept cannot be mended in place. A directory of records may hold ``provenance.json``: per
+records file, what is known of the machine, stack and numerics its records ran on, and from what
+evidence (a commit, a session's notes, a measured reproduction). The reports read it beside the
+records' own ``receipt.stack`` and ``receipt.numerics``, and say when a table crosses machines;
+``evaluate --reproduce`` reads it to replay a file under the numerics its machine had.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..fileio import read_json
+
+PROVENANCE_FILE = "provenance.json"
+
+
+def sidecar(records_path: Path) -> dict | None:
+    """The sidecar entry of a records file (None where its directory has no sidecar or no entry)."""
+    path = Path(records_path)
+    side = path.parent / PROVENANCE_FILE
+    if not side.is_file():
+        return None
+    entries = read_json(side).get("files", {})
+    return entries.get(path.name)
+
+
+def machine(records: list[dict], entry: dict | None = None) -> str:
+    """The machine a file's records ran on, as they name it (CPU model, and where kept its
+    instruction-set flags), else as the sidecar ``entry`` says (marked ``per sidecar``), else
+    ``unrecorded``. Several machines in one file are all named."""
+    named = set()
+    for r in records:
+        stack = (r.get("receipt") or {}).get("stack") or {}
+        if stack.get("cpu"):
+            isa = " ".join(w for w in (stack.get("cpu-isa") or "").split()[1:] if not w.startswith("onednn_max="))
+            named.add(f"{stack['cpu']}{f' ({isa})' if isa else ''}")
+    if named:
+        return "; ".join(sorted(named))
+    if entry and entry.get("cpu"):
+        return f"{entry['cpu']} (per sidecar)"
+    return "unrecorded"
+
+
+def numerics(records: list[dict], entry: dict | None = None) -> str:
+    """The numerics a file's records name, else the sidecar's, else ``native (before the pins)``."""
+    named = {((r.get("receipt") or {}).get("numerics") or {}).get("name") for r in records} - {None}
+    if named:
+        return "; ".join(sorted(named))
+    if entry and entry.get("numerics"):
+        return f"{entry['numerics']} (per sidecar)"
+    return "native (before the pins)"

@@ -1,0 +1,56 @@
+"""The side-swap condition (Spatial suites; not the paper's): the ID scene, the other instance instructed."""
+
+import numpy as np
+import pytest
+
+from mani_skill_softvt.evaluation.metrics import DISTURBED_M, instance_outcomes
+from mani_skill_softvt.evaluation.protocols import episodes, reset_options
+from mani_skill_softvt.evaluation.run import RunConfig
+from mani_skill_softvt.evaluation.runner import evaluate
+from mani_skill_softvt.evaluation.wrapper import make_env
+from mani_skill_softvt.tasks.suites import swapped_side, task_spec
+
+
+def test_the_swap_names_the_other_instance_in_the_same_words():
+    t = task_spec("spatial_soft", 1)  # the paper's task 1 instructs the right instance
+    s = swapped_side(t)
+    assert (t.side, s.side) == ("right", "left")
+    assert s.instruction == t.instruction.replace("right", "left") and swapped_side(s) == t
+    with pytest.raises(ValueError, match="one instance"):
+        swapped_side(task_spec("object_soft", 1))
+
+
+def test_the_protocol_reuses_the_id_seeds_on_the_spatial_suites_only():
+    swap = episodes("spatial_soft", "side_swap", per_task=10)
+    ids = episodes("spatial_soft", "id", per_task=10)
+    assert len(swap) == 100 and [e["seed"] for e in swap] == [e["seed"] for e in ids]
+    assert {e["condition"] for e in swap} == {"side_swap"} and reset_options("side_swap") == {"swap_side": True}
+    with pytest.raises(ValueError, match="Spatial suites"):
+        episodes("object_soft", "side_swap")
+    with pytest.raises(ValueError, match="swap_side"):
+        make_env("object_rigid", 0, obs_mode="state_dict").reset(seed=0, options={"swap_side": True})
+
+
+def test_the_swapped_episode_starts_from_the_id_state_and_the_expert_carries_the_other_instance(tmp_path):
+    env = make_env("spatial_rigid", 2, obs_mode="state_dict")
+    try:
+        seed = episodes("spatial_rigid", "id", tasks=[2], per_task=1)[0]["seed"]
+        env.reset(seed=seed)
+        id_state, id_target = env.unwrapped.get_state().clone(), env.unwrapped.target_instance
+        env.reset(seed=seed, options={"swap_side": True})
+        assert np.array_equal(env.unwrapped.get_state().numpy(), id_state.numpy())  # the same scene, bit for bit
+        assert env.unwrapped.target_instance != id_target
+        assert id_target in task_spec("spatial_rigid", 2).instruction
+        assert env.unwrapped.target_instance in env.unwrapped.instruction
+        env.reset(seed=seed)
+        assert env.unwrapped.target_instance == id_target  # the swap lasts one episode
+    finally:
+        env.close()
+    run = RunConfig.resolve("expert", suite="spatial_rigid", protocol="side_swap", tasks=(2,))
+    (rec,) = evaluate(run, tmp_path / "swap.jsonl")
+    assert rec["condition"] == "side_swap" and rec["instructed_instance"] != id_target
+    assert rec["success"] and not rec["other_in_target"]
+    moved = rec["instance_displacement"]
+    # The expert lifts and carries the instructed instance to the plate; the other stays put.
+    assert moved[rec["instructed_instance"]] > 0.1 and moved[id_target] < DISTURBED_M
+    assert instance_outcomes([rec]) == {"episodes": 1, "wrong_instance": 0, "both_disturbed": 0}
