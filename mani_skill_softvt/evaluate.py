@@ -45,7 +45,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     ap.add_argument("--protocol", default="id", choices=list(PROTOCOLS),
                     help="id (the paper's), ood (its nine conditions), side_swap (Spatial suites: the ID episode "
-                         "with the instruction naming the other instance; not the paper's)")
+                         "with the instruction naming the other instance; not the paper's), placement_x2 (the ID "
+                         "episodes with the placement ranges doubled: the difficulty study)")
     ap.add_argument("--policy", default="expert",
                     help="expert | expert_cartesian | hold | random | module:Class (imports and runs that code "
                          "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "

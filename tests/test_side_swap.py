@@ -54,3 +54,25 @@ def test_the_swapped_episode_starts_from_the_id_state_and_the_expert_carries_the
     # The expert lifts and carries the instructed instance to the plate; the other stays put.
     assert moved[rec["instructed_instance"]] > 0.1 and moved[id_target] < DISTURBED_M
     assert instance_outcomes([rec]) == {"episodes": 1, "wrong_instance": 0, "both_disturbed": 0}
+
+
+def test_doubled_placement_ranges_put_the_object_twice_as_far_from_the_layout_centre():
+    # The same random draws, scaled: the settled centroid's offset from the support's centre doubles
+    # (within the settling's sub-millimetre drift), and the protocol reuses the ID seeds.
+    from mani_skill_softvt.tasks import constants as C
+
+    ep = episodes("object_rigid", "placement_x2", tasks=[3], per_task=1)[0]
+    assert ep["seed"] == episodes("object_rigid", "id", tasks=[3], per_task=1)[0]["seed"]
+    assert reset_options("placement_x2") == {"placement_scale": 2.0}
+    env = make_env("object_rigid", 3, obs_mode="state_dict")
+    try:
+        centre = np.asarray(C.LAYOUTS["basket"]["object_center"])
+        env.reset(seed=ep["seed"])
+        one = env.unwrapped.soft_nodes("object").mean(0)[:2] - centre
+        env.reset(seed=ep["seed"], options={"placement_scale": 2.0})
+        two = env.unwrapped.soft_nodes("object").mean(0)[:2] - centre
+        assert np.linalg.norm(one) > 0.005 and np.allclose(two, 2 * one, atol=1e-3)
+        with pytest.raises(ValueError, match="placement_scale"):
+            env.reset(seed=0, options={"placement_scale": 3.0})
+    finally:
+        env.close()

@@ -3,7 +3,9 @@
 ID: fixed held-out initial states per task (seeds from :mod:`mani_skill_softvt.data.seeds`,
 disjoint from the training seeds); OOD episodes reuse the ID task, seed and therefore initial
 state, with one physical factor changed. Side swap (not the paper's; Spatial suites): the ID
-episode with the instruction naming the other instance, success requiring that one.
+episode with the instruction naming the other instance, success requiring that one. Doubled
+placement ranges (not the paper's; the difficulty study): the ID episode's random draws with the
+object's and the target's placement ranges twice as wide.
 """
 
 from __future__ import annotations
@@ -11,16 +13,21 @@ from __future__ import annotations
 from ..data.seeds import ID_EPISODES_PER_TASK, id_seed
 from ..tasks.suites import NUM_TASKS, OOD_CONDITIONS, get_suite
 
-PROTOCOLS = ("id", "ood", "side_swap")
 SIDE_SWAP = "side_swap"  # the condition of the side-swap protocol's episodes
+PLACEMENT_X2 = "placement_x2"  # the difficulty study's: the ID episodes with the placement ranges doubled
+PROTOCOLS = ("id", "ood", SIDE_SWAP, PLACEMENT_X2)
 
 
 def reset_options(condition: str) -> dict:
     """The env's reset options for an episode of ``condition``: none for ID, ``swap_side`` for the
-    side swap, the OOD condition otherwise."""
+    side swap, ``placement_scale`` 2 for the doubled ranges, the OOD condition otherwise."""
     if condition == "id":
         return {}
-    return {"swap_side": True} if condition == SIDE_SWAP else {"ood": condition}
+    if condition == SIDE_SWAP:
+        return {"swap_side": True}
+    if condition == PLACEMENT_X2:
+        return {"placement_scale": 2.0}
+    return {"ood": condition}
 
 
 def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EPISODES_PER_TASK,
@@ -41,6 +48,8 @@ def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EP
         if get_suite(suite).layout != "spatial":
             raise ValueError(f"the side swap applies to the Spatial suites (two instances), not '{suite}'")
         conds = [SIDE_SWAP]
+    elif protocol == PLACEMENT_X2:
+        conds = [PLACEMENT_X2]
     else:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got '{protocol}'")
     return [{"suite": suite, "task_id": t, "condition": c, "seed": id_seed(t, i)}

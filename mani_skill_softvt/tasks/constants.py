@@ -56,6 +56,10 @@ LAYOUTS = {
 }
 SPATIAL_HALF_GAP = 0.09  # m: each instance's offset from the pair's centre (62 mm objects, 80 mm jaw)
 OBJECT_YAW_RANGE = np.pi / 12
+# The difficulty study scales the placement ranges (reset option placement_scale) up to twice: the
+# doubled Object-Soft ranges keep the object 0.17 m or more from the basket's centre and inside the
+# expert's reach (its doubled-range episodes are the study's check); larger ones are not verified.
+MAX_PLACEMENT_SCALE = 2.0
 
 # Success and failure predicates.
 REST_SPEED = 0.02  # m/s: centroid speed below which an object is at rest

@@ -52,7 +52,9 @@ reward (``calibration_dir`` to read cards elsewhere). ``normalized_dense``: ``de
 **Reset options:** ``ood`` (one of :data:`~mani_skill_softvt.tasks.suites.OOD_CONDITIONS`) or
 the single factors ``light_intensity`` (nominal 135), ``mass_scale``, ``youngs_modulus_scale``;
 in the Spatial suites ``swap_side`` (True: the instruction names the other instance and success
-requires that one; the scene, seed and initial state are the ID episode's: the side-swap condition).
+requires that one; the scene, seed and initial state are the ID episode's: the side-swap condition);
+``placement_scale`` (default 1): the object's and the target's placement ranges scaled about their
+centres, the same random draws (the difficulty study: how much the ranges explain).
 """
 
 from __future__ import annotations
@@ -102,6 +104,7 @@ class SoftVTTaskEnv(SoftBodyEnv):
                              f"{why.format(path='FILE.h5')}")
         self.task: TaskSpec = task_spec(suite, task_id)
         self._instructed: TaskSpec = self.task  # the task as this episode instructs it (swap_side: the other side)
+        self._placement_scale = 1.0  # the episode's placement ranges, scaled (reset option placement_scale)
         self.asset_card = load_card(self.task.asset_id)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self.calibration_dir = CALIBRATION_DIR if calibration_dir is None else calibration_dir
@@ -128,6 +131,11 @@ class SoftVTTaskEnv(SoftBodyEnv):
         swap = options.pop("swap_side", False)
         if not isinstance(swap, bool):
             raise ValueError(f"reset option swap_side={swap!r}: give True or False")
+        scale = options.pop("placement_scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale <= C.MAX_PLACEMENT_SCALE:
+            raise ValueError(f"reset option placement_scale={scale!r}: give a number in (0, {C.MAX_PLACEMENT_SCALE}] "
+                             "(1: the benchmark's ranges)")
+        self._placement_scale = float(scale)
         # Checked before the scene is rebuilt, and kept for the episode (the layout draws no side).
         try:
             self._instructed = swapped_side(self.task) if swap else self.task
@@ -177,9 +185,10 @@ class SoftVTTaskEnv(SoftBodyEnv):
         layout = C.LAYOUTS[self.task.target]
         qpos = C.ROBOT_REST_QPOS.copy()
         qpos[:7] += rng.normal(0.0, self.robot_init_qpos_noise, 7)
-        obj_xy = np.asarray(layout["object_center"]) + rng.uniform(-1, 1, 2) * layout["object_half_range"]
+        k = self._placement_scale  # 1 but in the difficulty study; the draws are the same either way
+        obj_xy = np.asarray(layout["object_center"]) + rng.uniform(-1, 1, 2) * np.asarray(layout["object_half_range"]) * k
         yaws = rng.uniform(-C.OBJECT_YAW_RANGE, C.OBJECT_YAW_RANGE, 2)
-        tgt_xy = np.asarray(layout["target_center"]) + rng.uniform(-1, 1, 2) * layout["target_half_range"]
+        tgt_xy = np.asarray(layout["target_center"]) + rng.uniform(-1, 1, 2) * np.asarray(layout["target_half_range"]) * k
         self.agent.reset(torch.as_tensor(qpos[None], dtype=torch.float32))
         self.target.set_pose(sapien.Pose(p=[tgt_xy[0], tgt_xy[1], 0.0]))
         poses = {}
