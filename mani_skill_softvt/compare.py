@@ -4,8 +4,8 @@
         --b mine-seed0.jsonl mine-seed1.jsonl mine-seed2.jsonl [--paper 10 --claim sign]
 
 Each file holds one training seed's records of one run (``evaluate``'s JSONL, every line verified
-against its hash); all are scored on the episodes they share (``--per-task 25``: the first 25 ID
-episodes of each task, the pre-registered subset). Printed per outcome (TSR, DSR, successes past
+against its hash); all are scored on the episodes they share, by default the first 25 of each task
+(the pre-registered subset; ``--per-task 0`` for all). The seed variance is pooled over A and B. Printed per outcome (TSR, DSR, successes past
 tolerance): every seed's score, B - A over seeds with its seed-level 95 % and 90 % intervals
 (Student's t, seed variance pooled over both; docs/preregistration.md), with ``--paper`` the
 verdict on that claimed difference, and rliable's mean scores with stratified-bootstrap intervals
@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from .evaluation.metrics import paired_comparison
+from .evaluation.provenance import machine, numerics, sidecar
 from .evaluation.records import read_records
 from .evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, outcome_of, rliable_summary, seed_scores,
                                     size_note, verdict)
@@ -79,23 +80,35 @@ def report(a_runs, b_runs, episodes: set, paper: float | None, claim: str) -> st
     return "\n".join(lines)
 
 
+def machines(paths: list[Path], runs: list[list[dict]]) -> str:
+    """Where each file's records ran (their stack and numerics, else the provenance sidecar beside
+    them), and whether the comparison crosses machines or numerics."""
+    rows = [(Path(p).name, machine(run, sidecar(p)), numerics(run, sidecar(p))) for p, run in zip(paths, runs)]
+    lines = ["\nwhere the records ran:"] + [f"  {n}: {m}; numerics {x}" for n, m, x in rows]
+    if len({m for _, m, _ in rows}) > 1 or len({x for _, _, x in rows}) > 1:
+        lines.append("  the files cross machines or numerics: their rates compare, their records do not")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  epilog="the rule: docs/preregistration.md")
     ap.add_argument("--a", nargs="+", type=Path, required=True, help="recipe A: one records file per training seed")
     ap.add_argument("--b", nargs="+", type=Path, required=True, help="recipe B: one records file per training seed")
-    ap.add_argument("--per-task", type=int, default=None,
-                    help="score on the first N shared episodes of each task (the pre-registered subset: 25)")
+    ap.add_argument("--per-task", type=int, default=25,
+                    help="score on the first N shared episodes of each task (default 25: the pre-registered subset; "
+                         "0: every shared episode)")
     ap.add_argument("--paper", type=float, default=None, help="a claimed difference B - A in points, to judge")
     ap.add_argument("--claim", choices=("sign", "size", "none"), default="sign",
                     help="what --paper claims: its sign, its size, or no difference")
     args = ap.parse_args(argv)
     try:
         a_runs, b_runs = load_runs(args.a), load_runs(args.b)
-        episodes = subset(a_runs + b_runs, args.per_task)
+        episodes = subset(a_runs + b_runs, args.per_task or None)
         if not episodes:
             raise ValueError("the files share no episode: compare runs of the same protocol")
-        out = report(a_runs, b_runs, episodes, args.paper, args.claim)
+        out = report(a_runs, b_runs, episodes, args.paper, args.claim) + "\n" + machines([*args.a, *args.b],
+                                                                                      a_runs + b_runs)
     except ValueError as e:  # a corrupt or edited record file among them: one line, naming file and line
         ap.exit(2, f"softvt-compare: {e}\n")
     print(out)

@@ -221,8 +221,10 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
         numerics = recorded.get("numerics")
         if any(demo_set.dir.glob("task*.h5")) and numerics != chosen_numerics().name:
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under numerics "
-                             f"{numerics or 'native (before the pins)'}, this process runs {chosen_numerics().name}; "
-                             f"generate into another --out, or set SOFTVT_NUMERICS={numerics or 'native'} to extend them")
+                             f"{numerics or 'of their machine, before the pins'}, this process runs "
+                             f"{chosen_numerics().name}; generate into another --out"
+                             + (f", or set SOFTVT_NUMERICS={numerics} to extend them" if numerics else
+                                " (to extend them, set SOFTVT_NUMERICS as their machine ran: docs/install.md)"))
     # Written first (a resumed run checks its physics), and again with the seeds actually drawn.
     _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None if accepted else num)
     total = sum(accepted_demos_expected(demo_set, t, num, accepted) for t in tasks) if accepted else len(tasks) * num

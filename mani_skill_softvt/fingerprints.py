@@ -18,7 +18,7 @@ default tests check against the committed goldens (``tests/golden/fingerprints.j
   the weights, EMA and losses;
 - ``calibration_trial``: one calibration trial (asset 0, closure 0.6) on SoftGraspLift-v1;
 - ``record``: the evaluator's record of a committed policy's first ID episode of task 0 (all
-  fields but the wall time, the stack and the numerics).
+  fields but the wall time, the stack, the numerics and the package version).
 """
 
 from __future__ import annotations
@@ -213,7 +213,8 @@ def policy_record(policy: str = "baselines/policies/object_rigid/vt-c-cpu.pt", s
     run = RunConfig.resolve(policy, suite=suite, tasks=(task_id,), episodes_per_task=1)
     with tempfile.TemporaryDirectory() as tmp:
         (rec,) = evaluate(run, Path(tmp) / "records.jsonl")
-    receipt = {k: v for k, v in rec["receipt"].items() if k not in ("stack", "numerics")}
+    # The stack, numerics and package version name the run; they are not what it computed.
+    receipt = {k: v for k, v in rec["receipt"].items() if k not in ("stack", "numerics", "package_version")}
     rec = {**{k: v for k, v in rec.items() if k not in NOT_REPRODUCED}, "receipt": receipt}
     return {"steps": rec["steps"], "r_max": rec["r_max"], "termination": rec["termination"], "episode": sha(rec)}
 

@@ -104,7 +104,9 @@ def parse(name: str) -> Numerics:
     unknown = [p for p in parts if p not in PARTS]
     if unknown:
         raise ValueError(f"{NUMERICS_ENV}={name!r}: unknown part(s) {', '.join(unknown)}; parts are {', '.join(PARTS)}")
-    return Numerics(name, tuple(p for p in PARTS if p in parts))
+    ordered = tuple(p for p in PARTS if p in parts)
+    # One spelling per choice (records and demo sets compare names): the parts in PARTS' order.
+    return Numerics(PINNED if ordered == tuple(PARTS) else f"{PINNED}:{','.join(ordered)}", ordered)
 
 
 def chosen(environ=None) -> Numerics:
@@ -140,6 +142,13 @@ def pin(environ=None) -> Numerics:
         environ[ORIGINAL_ENV] = json.dumps(original)
     if environ is os.environ:
         _ORIGINAL.update(original)
+    # Every pinning variable as the choice has it: pinned, or as the shell had it (a process started by a
+    # pinned one, for native numerics, must not keep the pins it inherited).
+    for var in _pinning_variables():
+        if original.get(var) is None:
+            environ.pop(var, None)
+        else:
+            environ[var] = original[var]
     for var, value in numerics.environment().items():
         environ[var] = value
     return numerics
@@ -223,7 +232,8 @@ def resolved() -> dict:
             "numpy": not out["numpy_avx512"], "opencv": not out["opencv_avx512"],
             "openblas": out["openblas_core"] in (None, "Haswell")}
     out["released"] = sorted(_RELEASED)
-    out["pinned"] = all(took.get(p, True) for p in numerics.parts) and bool(numerics.parts) and not _RELEASED
+    # Pinned: every part chosen, and each took effect (a subset of the parts holds on one machine kind only).
+    out["pinned"] = numerics.parts == tuple(PARTS) and all(took.values()) and not _RELEASED
     return out
 
 
@@ -249,7 +259,8 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
         return receipt["numerics"]["name"]
     if known and known.get("numerics"):
         return known["numerics"]
-    return LEGACY_NUMERICS.get((receipt.get("stack") or {}).get("cpu"), NATIVE)
+    cpu = (receipt.get("stack") or {}).get("cpu") or ""
+    return next((n for model, n in LEGACY_NUMERICS.items() if cpu.startswith(model)), NATIVE)
 
 
 def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:

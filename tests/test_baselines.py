@@ -641,8 +641,9 @@ def test_loading_a_policy_file_says_what_is_wrong(tmp_path):
     with pytest.raises(ValueError, match="training state"):
         load_policy(str(tmp_path / "run" / T.CHECKPOINT))
     (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError, match="bad.pt cannot be read"):
+    with pytest.raises(ValueError, match="bad.pt cannot be read") as e:
         load_policy(str(tmp_path / "bad.pt"))
+    assert "export it again" in str(e.value) and "--out" not in str(e.value)  # not the trainer's advice
 
 
 def test_touch_inputs_of_another_tactile_model_are_refused(tmp_path):

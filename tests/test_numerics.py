@@ -20,8 +20,9 @@ GOLDEN = json.loads((Path(__file__).parent / "golden" / "fingerprints.json").rea
 
 
 def _pinned_variables(queue):
+    got = N.resolved()
     return N.chosen().name, {v: os.environ.get(v) for v in ("ATEN_CPU_CAPABILITY", "OPENBLAS_CORETYPE")}, \
-        N.resolved()["torch_cpu_capability"]
+        got["torch_cpu_capability"] if got["pinned"] or got["name"] == "native" else "not pinned in full"
 
 
 def _released_onednn(queue):
@@ -37,6 +38,9 @@ def test_numerics_names_parse_and_bad_ones_say_what_to_write():
     assert N.parse("x86-64-v3").parts == tuple(N.PARTS)
     assert N.parse("native").parts == () and N.parse("native").warp_cpu_compiler_flags is None
     assert N.parse("x86-64-v3:warp,aten").parts == ("warp", "aten")
+    # One spelling per choice: the parts in their canonical order; all of them is the full pin.
+    assert N.parse("x86-64-v3:aten,warp").name == "x86-64-v3:warp,aten"
+    assert N.parse("x86-64-v3:" + ",".join(reversed(N.PARTS))).name == "x86-64-v3"
     assert N.parse("x86-64-v3:aten").warp_cpu_compiler_flags is None
     with pytest.raises(ValueError, match="SOFTVT_NUMERICS='avx512'.*'x86-64-v3'"):
         N.parse("avx512")
@@ -59,6 +63,9 @@ def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch)
     (native,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="native") if k == "result"]
     assert native[:2] == ("native", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": None})
     assert os.environ["ATEN_CPU_CAPABILITY"] == "avx2"  # this process's own pins are as they were
+    # A part pinned alone: the others are the shell's in the worker, and its records are not "pinned".
+    (part,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="x86-64-v3:openblas") if k == "result"]
+    assert part[:2] == ("x86-64-v3:openblas", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": "Haswell"})
 
 
 def test_a_bfloat16_training_releases_onednn_alone_and_says_so():
@@ -118,3 +125,18 @@ def test_an_expert_episode_is_the_golden_one(case):
 
 def test_a_committed_policys_first_id_episode_is_the_golden_one():
     _same("record", F.CASES["record"](), ("steps", "r_max", "termination", "episode"))
+
+
+def test_a_records_file_holds_one_numerics_and_resuming_it_under_others_is_refused(tmp_path):
+    from mani_skill_softvt.evaluation.records import seal
+    from mani_skill_softvt.evaluation.run import RunConfig
+    from mani_skill_softvt.evaluation.runner import evaluate
+
+    run = RunConfig.resolve("expert", tasks=(3,))
+    (ep,) = run.episodes()
+    old = seal({**ep, **run.record_fields(), "termination": "success", "success": True, "dsr_success": True,
+                "receipt": {"stack": {"cpu": "Intel(R) Xeon(R) Processor"}}})  # made before the pins
+    path = tmp_path / "records.jsonl"
+    path.write_text(json.dumps(old) + "\n")
+    with pytest.raises(ValueError, match="made under numerics native.*SOFTVT_NUMERICS=native"):
+        evaluate(run, path)

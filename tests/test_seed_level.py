@@ -60,6 +60,11 @@ def test_verdicts_follow_the_registered_rule():
     assert S.verdict(_c(-5, 5, -4, 4), paper=10, claim="sign") == S.EQUIVALENT
     assert S.verdict(_c(1, 9), paper=0, claim="none") == S.CONTRADICTED
     assert S.verdict(_c(-9, 9, -7, 7), paper=0, claim="none") == S.UNRESOLVED
+    # A paper effect inside the margin and inside the interval: the interval decides nothing.
+    assert S.verdict(_c(-3, 4, -2.2, 3.2), paper=2.0) == S.UNRESOLVED
+    assert S.verdict(_c(-3, 1.5, -2.2, 1.0), paper=2.0, claim="size") == S.CONTRADICTED  # excludes its size
+    assert S.verdict(_c(-3, 1.5, -2.2, 1.0), paper=2.0) == S.EQUIVALENT  # a sign claim: equivalent to none
+    assert S.compare_seeds([50.0, 50.0], [60.0, 60.0]).ci95 is None  # seeds alike: no interval, not a certainty
     with pytest.raises(ValueError, match="claim='none'"):
         S.verdict(_c(1, 2), paper=0)
 

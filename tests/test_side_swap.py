@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mani_skill_softvt.evaluation.metrics import DISTURBED_M, instance_outcomes
-from mani_skill_softvt.evaluation.protocols import episodes, reset_options
+from mani_skill_softvt.evaluation.protocols import episodes, protocol_of, reset_options
 from mani_skill_softvt.evaluation.run import RunConfig
 from mani_skill_softvt.evaluation.runner import evaluate
 from mani_skill_softvt.evaluation.wrapper import make_env
@@ -27,6 +27,11 @@ def test_the_protocol_reuses_the_id_seeds_on_the_spatial_suites_only():
     assert {e["condition"] for e in swap} == {"side_swap"} and reset_options("side_swap") == {"swap_side": True}
     with pytest.raises(ValueError, match="Spatial suites"):
         episodes("object_soft", "side_swap")
+    with pytest.raises(ValueError, match="Object suites"):
+        episodes("spatial_soft", "placement_x2")
+    # A record names its condition; a reproduction finds its protocol from it.
+    assert [protocol_of(c) for c in ("id", "side_swap", "placement_x2", "mass_x2.5")] == \
+        ["id", "side_swap", "placement_x2", "ood"]
     with pytest.raises(ValueError, match="swap_side"):
         make_env("object_rigid", 0, obs_mode="state_dict").reset(seed=0, options={"swap_side": True})
 

@@ -40,7 +40,11 @@ def read_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, d
             raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
                                     "`python -m mani_skill_softvt.baselines.train --variant ...` (it writes policy.pt)")
         data = path.read_bytes()
-    ckpt = load_checkpoint(data, path)
+    try:
+        ckpt = load_checkpoint(data, path)
+    except ValueError:  # the trainer's advice (delete it, train into another --out) does not fit a policy given to run
+        raise ValueError(f"{path} cannot be read as a policy file (truncated or damaged): copy it again from where "
+                         "it was trained or committed, or export it again (softvt-export-policy)") from None
     if not isinstance(ckpt, dict) or "config" not in ckpt or "model" not in ckpt or "optimizer" in ckpt:
         raise ValueError(f"{path} is not a baseline policy file (policy.pt written at the end of training); "
                          "a checkpoint.pt is a training state: finish the run to get policy.pt")

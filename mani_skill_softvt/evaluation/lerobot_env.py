@@ -108,6 +108,9 @@ class LeRobotEnv(gym.Env):
                  camera_size: tuple[int, int] | None = None, image_size: tuple[int, int] | None = None,
                  records: str | Path | None = None, policy_spec: str = "lerobot", policy_sha256: str | None = None,
                  first_seed: int = 0, recorded_episodes: int | None = None, render_mode: str = "rgb_array"):
+        if protocol not in ("id", "ood"):  # the side swap and the difficulty study run through evaluate
+            raise ValueError(f"protocol {protocol!r}: lerobot-eval runs 'id' or 'ood'; run {protocol} with "
+                             "softvt-evaluate --protocol")
         if protocol == "ood" and condition is None:
             raise ValueError("the OOD protocol runs one condition per env: give condition (e.g. 'mass_x2.5')")
         self.suite, self.task_id, self.protocol = suite, int(task_id), protocol

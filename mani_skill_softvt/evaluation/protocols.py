@@ -18,6 +18,11 @@ PLACEMENT_X2 = "placement_x2"  # the difficulty study's: the ID episodes with th
 PROTOCOLS = ("id", "ood", SIDE_SWAP, PLACEMENT_X2)
 
 
+def protocol_of(condition: str) -> str:
+    """The protocol an episode's condition belongs to (a record names its condition)."""
+    return condition if condition in ("id", SIDE_SWAP, PLACEMENT_X2) else "ood"
+
+
 def reset_options(condition: str) -> dict:
     """The env's reset options for an episode of ``condition``: none for ID, ``swap_side`` for the
     side swap, ``placement_scale`` 2 for the doubled ranges, the OOD condition otherwise."""
@@ -49,6 +54,9 @@ def episodes(suite: str, protocol: str = "id", tasks=None, per_task: int = ID_EP
             raise ValueError(f"the side swap applies to the Spatial suites (two instances), not '{suite}'")
         conds = [SIDE_SWAP]
     elif protocol == PLACEMENT_X2:
+        if get_suite(suite).layout != "object":
+            # Doubled, the Spatial pair's range reaches the plate's rim: not a scene the study checked.
+            raise ValueError(f"the doubled placement ranges apply to the Object suites, not '{suite}'")
         conds = [PLACEMENT_X2]
     else:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got '{protocol}'")

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fileio import append_jsonl, file_sha256
+from ..numerics import chosen as chosen_numerics
 from ..numerics import numerics_of, resolved
 from ..observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
@@ -45,7 +46,7 @@ from ..rollout import Observer, rollout
 from ..stack import software_stack
 from ..tasks.suites import get_suite
 from ..version import __version__
-from .protocols import episode_key, reset_options
+from .protocols import episode_key, protocol_of, reset_options
 from .provenance import sidecar
 from .records import read_records, seal
 from .run import RunConfig
@@ -177,6 +178,12 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
     out = Path(out)
     episodes = run.episodes() if episodes is None else episodes
     done = run_records(out, run)
+    wanted = numerics or chosen_numerics().name
+    made = sorted({numerics_of(r, sidecar(out)) for r in done.values()} - {wanted})
+    if made:  # one file, one numerics: a reproduction replays a file under one
+        raise ValueError(f"{out} holds records of this run made under numerics {', '.join(made)}, and this process "
+                         f"runs {wanted}: evaluate into another --out, or set SOFTVT_NUMERICS={made[0]} to complete "
+                         "them as they were made (docs/install.md, numerics)")
     todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
         progress(len(episodes) - len(todo))
@@ -218,6 +225,8 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
 
 RUN_FIELDS = ("policy", "obs_mode", "control_mode", "camera_size", "policy_sha256")  # what names a run
 NOT_REPRODUCED = ("wall_s", "record_sha256")  # the wall time differs run to run, and with it the hash
+# Fields records have carried since a later version: a stored record without them is not compared on them.
+ADDED_FIELDS = ("instructed_instance", "other_in_target", "instance_displacement")
 # The stack and numerics a record names are not results: a reproduction on another stack reports them
 # as the reason its bits may differ (evaluate --reproduce), not as a difference of the episode.
 NOT_COMPARED_IN_RECEIPT = ("stack", "numerics")
@@ -228,7 +237,7 @@ def record_differences(stored: dict, new: dict) -> list[str]:
     but the wall time."""
     out = []
     for k in sorted(set(stored) | set(new)):
-        if k in NOT_REPRODUCED:
+        if k in NOT_REPRODUCED or (k in ADDED_FIELDS and k not in stored):
             continue
         a, b = stored.get(k), new.get(k)
         if isinstance(a, dict) and isinstance(b, dict):
@@ -293,7 +302,7 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
                          f"differs from their policy_sha256 {sha[:12]}...): it was replaced or retrained")
     size = first.get("camera_size")
     run = RunConfig.resolve(spec, first["obs_mode"], first["control_mode"], tuple(size) if size else None,
-                            suite=first["suite"], protocol="id" if first["condition"] == "id" else "ood")
+                            suite=first["suite"], protocol=protocol_of(first["condition"]))
     chosen, count = [], defaultdict(int)
     for r in records:
         key = (r["suite"], r["task_id"])

@@ -20,7 +20,9 @@ of two recipes is a comparison of their means over training seeds, with an inter
   excludes 0 on the paper's side; *contradicted* when it excludes the paper's effect (its size for a
   size claim, its sign for a sign claim) without supporting it; *equivalent* when the 90 % interval
   lies within +-:data:`EQUIVALENCE_MARGIN` (two one-sided tests; the margin fixed in advance, not
-  read off the noise); *unresolved* otherwise. A finding is read from its parts (:func:`finding_verdict`):
+  read off the noise) and the 95 % interval excludes the paper's effect; *unresolved* otherwise, and
+  always when the 95 % interval holds both 0 and the paper's effect. Seeds that scored alike (zero
+  variance) give no interval. A finding is read from its parts (:func:`finding_verdict`):
   an unresolved part never makes it contradicted.
 
 rliable (Agarwal et al., NeurIPS 2021) adds, for reading and not for verdicts, each recipe's mean
@@ -107,6 +109,8 @@ def contrast(groups, weights, family: tuple[float | None, int] | None = None) ->
     (variance, df) pooled over more recipes (:func:`pooled_variance`); default, the groups' own seeds."""
     groups = [np.asarray(g, dtype=float) for g in groups]
     var, df = family if family is not None else pooled_variance(*groups)
+    if var is not None and var <= 0:
+        var = None  # seeds that scored alike measure no noise: no interval rather than a zero-width one
     value = float(sum(w * g.mean() for w, g in zip(weights, groups)))
     se = None if var is None else math.sqrt(var * sum(w * w / len(g) for w, g in zip(weights, groups)))
     ci95, ci90 = _intervals(value, se, df)
@@ -164,6 +168,8 @@ def verdict(c: Comparison, paper: float, claim: str = "sign", margin: float = EQ
     excluded = hi_s < (abs(paper) if claim == "size" else 0.0)
     if excluded:
         return CONTRADICTED
+    if lo <= paper <= hi:  # the interval holds both 0 and the paper's effect: it decides nothing
+        return UNRESOLVED
     return EQUIVALENT if equivalent else UNRESOLVED
 
 

@@ -200,7 +200,7 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
     lines.append(header)
     for (suite, condition, variant), recs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "id", kv[0][2])):
         s = summarize(recs)
-        protocol = "ID" if condition == "id" else f"OOD {condition}"
+        protocol = {"id": "ID", "side_swap": "side swap", "placement_x2": "placement x2"}.get(condition, f"OOD {condition}")
         paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0].split(" ")[0]) if suite == "object_soft" and condition == "id" else None
         rows[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
         lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
