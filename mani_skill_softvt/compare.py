@@ -22,8 +22,8 @@ from pathlib import Path
 from .evaluation.metrics import paired_comparison
 from .evaluation.provenance import machine, numerics, sidecar
 from .evaluation.records import read_records
-from .evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, outcome_of, rliable_summary, seed_scores,
-                                    size_note, verdict)
+from .evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, first_per_task, outcome_of, rliable_summary,
+                                    seed_scores, size_note, verdict)
 
 
 def load_runs(paths: list[Path]) -> list[list[dict]]:
@@ -41,13 +41,7 @@ def load_runs(paths: list[Path]) -> list[list[dict]]:
 
 def subset(runs: list[list[dict]], per_task: int | None) -> set:
     """The episodes every run has; with ``per_task``, the first ``per_task`` of each task (by seed)."""
-    common = set.intersection(*({episode_key(r) for r in run} for run in runs))
-    if per_task is None:
-        return common
-    by_task: dict = {}
-    for k in sorted(common, key=lambda k: (k[0], k[1], k[2], k[3])):
-        by_task.setdefault(k[:3], []).append(k)
-    return {k for ks in by_task.values() for k in ks[:per_task]}
+    return first_per_task(set.intersection(*({episode_key(r) for r in run} for run in runs)), per_task)
 
 
 def report(a_runs, b_runs, episodes: set, paper: float | None, claim: str) -> str:

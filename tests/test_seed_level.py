@@ -124,3 +124,27 @@ def test_the_command_compares_seed_files_and_refuses_an_edited_one_in_one_line(t
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{files['a'][0]}:" in err and "record_sha256" in err
+
+
+def test_seed_findings_score_each_seed_on_the_registered_subset_and_pool_the_family():
+    from mani_skill_softvt.studies import seed_findings as SF
+
+    def run(p, seed, rng):  # a complete ID run of one seed: 50 episodes a task, success with probability p
+        return [{"suite": "object_soft", "task_id": t, "condition": "id", "seed": 50_000_000 + 1000 * t + i,
+                 "policy": "baselines/policies/x.pt", "success": bool(ok), "dsr_success": bool(ok)}
+                for t in range(10) for i, ok in enumerate(rng.random(50) < p)]
+
+    rng = np.random.default_rng(0)
+    policies = {("object_soft", "vo-c-cpu"): {0: run(0.5, 0, rng), 1: run(0.6, 1, rng)},
+                ("object_soft", "vt-c-cpu"): {0: run(0.9, 0, rng), 1: run(0.95, 1, rng), 2: run(0.9, 2, rng)[:100]}}
+    table = SF.seed_table(policies, "tsr")
+    assert len(table[("object_soft", "vo-c-cpu")]) == 2 and len(table[("object_soft", "vt-c-cpu")]) == 2  # partial left out
+    # Each score is on the first 25 episodes of each task: a multiple of 100 / 250 points.
+    assert all(abs(x * 2.5 - round(x * 2.5)) < 1e-9 for v in table.values() for x in v)
+    var, df = SF.family(table, ("object_soft",))
+    assert df == 2 and var == pytest.approx(S.pooled_variance(*table.values())[0])
+    judged = SF.claims(policies, {})
+    touch = next(p for p in judged["3"] if p["claim"] == "VT-C - VO-C, TSR")
+    assert touch["comparison"]["difference"] == pytest.approx(np.mean(table[("object_soft", "vt-c-cpu")])
+                                                               - np.mean(table[("object_soft", "vo-c-cpu")]))
+    assert all(p["verdict"] == "unresolved" and p["why"] == "not run" for p in judged["4"])

@@ -58,6 +58,17 @@ def episode_key(record: dict) -> tuple:
     return record["suite"], int(record["task_id"]), record["condition"], int(record["seed"])
 
 
+def first_per_task(keys, n: int | None) -> set:
+    """Of episode keys, the first ``n`` of each (suite, task, condition) by seed (None: all): the
+    pre-registered subset is the first 25 ID episodes of each task."""
+    if n is None:
+        return set(keys)
+    by_task: dict = {}
+    for k in sorted(keys):
+        by_task.setdefault(k[:3], []).append(k)
+    return {k for ks in by_task.values() for k in ks[:n]}
+
+
 def seed_scores(runs: list[list[dict]], outcome: str, episodes: set | None = None) -> np.ndarray:
     """Each run's (training seed's) score in points on ``episodes`` (default: those every run has)."""
     keys = [{episode_key(r): r for r in run} for run in runs]

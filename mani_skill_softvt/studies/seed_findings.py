@@ -1,0 +1,179 @@
+"""The paper's findings judged by the pre-registered seed-level rule (docs/preregistration.md).
+
+    python -m mani_skill_softvt.studies.seed_findings baselines/results
+
+Reads every committed ID record of the Object suites (``<suite>_id_<policy>[-seed<N>].jsonl``; a
+file's records are one training seed of one recipe) and the OOD records of VO-C and VT-C, scores
+each seed on the registered subset (the first 25 ID episodes of each task), pools the seed-to-seed
+variance over each suite's family of recipes, and judges every registered Object claim with
+:mod:`mani_skill_softvt.evaluation.seed_level`. Writes ``seed_findings.md`` and ``.json`` beside
+the records: each recipe's mean over seeds with its seed-level interval and every seed's score,
+then each claim with B - A, its interval, the paper's effect and the verdict, and each finding's
+verdict from its parts. The claims are the registered table's; none is added or dropped here.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..evaluation.records import read_records
+from ..evaluation.seed_level import (ALPHA, contrast, episode_key, finding_verdict, first_per_task, ood_interval,
+                                     outcome_of, pooled_variance, size_note, verdict)
+from ..fileio import atomic_write, atomic_write_json
+from .findings import POLICIES, by_policy, load_ood
+
+PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
+OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
+
+
+def seed_table(policies: dict, outcome: str) -> dict[tuple[str, str], list[float]]:
+    """(suite, recipe) -> each complete seed's score (points) on the registered subset."""
+    out = {}
+    for (suite, name), seeds in sorted(policies.items()):
+        scores = []
+        for _, recs in sorted(seeds.items()):
+            keys = first_per_task({episode_key(r) for r in recs}, PER_TASK)
+            if len(keys) < PER_TASK * 10:
+                continue  # a partial run is not a seed's score
+            by = {episode_key(r): r for r in recs}
+            scores.append(100.0 * float(np.mean([outcome_of(by[k], outcome) for k in keys])))
+        if scores:
+            out[(suite, name)] = scores
+    return out
+
+
+def family(table: dict, suites: tuple[str, ...]) -> tuple[float | None, int]:
+    """The seed variance pooled over every recipe of ``suites`` (the registered families)."""
+    return pooled_variance(*[v for (suite, _), v in table.items() if suite in suites])
+
+
+def judge(text: str, groups: list, weights: list, fam, paper: float, kind: str) -> dict:
+    missing = [i for i, g in enumerate(groups) if not g]
+    if missing:
+        return {"claim": text, "paper": paper, "kind": kind, "verdict": "unresolved", "why": "not run",
+                "comparison": None}
+    c = contrast(groups, weights, fam)
+    v = verdict(c, paper, kind)
+    return {"claim": text, "paper": paper, "kind": kind, "verdict": v, "comparison": c.to_dict(),
+            "seeds": [len(g) for g in groups], "note": size_note(c, paper) if kind == "size" and v == "supported" else None}
+
+
+def claims(policies: dict, ood: dict) -> dict[str, list[dict]]:
+    """Every registered Object claim, judged."""
+    t = {o: seed_table(policies, o) for o in OUTCOME_NAMES}
+    soft, rigid = ("object_soft",), ("object_rigid",)
+
+    def g(outcome, suite, key):
+        return t[outcome].get((suite, POLICIES[key]), [])
+
+    fam = {o: family(t[o], soft) for o in t}
+    both = {o: family(t[o], soft + rigid) for o in t}
+    out: dict[str, list[dict]] = {"1": [], "2": [], "3": [], "4": []}
+    for (suite, name), scores in sorted(t["past_tolerance"].items()):
+        if suite == "object_soft":
+            out["1"].append({"claim": f"{name}: every seed has successes past tolerance", "paper": "> 0", "kind": "count",
+                             "verdict": "supported" if min(scores) > 0 else "contradicted", "comparison": None,
+                             "seeds": [len(scores)]})
+    out["1"].append(judge("VT-C - VO-C, TSR - DSR", [g("past_tolerance", "object_soft", "vo-c"),
+                                                      g("past_tolerance", "object_soft", "vt-c")], [-1, 1],
+                          fam["past_tolerance"], 5.8, "sign"))
+    tsr = judge("VO-B - VO-C, TSR (completion ranks VO-B higher)", [g("tsr", "object_soft", "vo-c"),
+                                                                     g("tsr", "object_soft", "vo-b")], [-1, 1], fam["tsr"], 1.0, "sign")
+    dsr = judge("VO-B - VO-C, DSR (and the deformation-aware score lower)", [g("dsr", "object_soft", "vo-c"),
+                                                                              g("dsr", "object_soft", "vo-b")], [-1, 1], fam["dsr"], -1.0,
+                "sign")
+    tsr["paper"], dsr["paper"] = "> 0 (a misranking)", "< 0 (a misranking)"
+    out["1"] += [tsr, dsr]
+    out["2"].append(judge("Object-Rigid VO-C - Object-Soft VO-C, TSR", [g("tsr", "object_soft", "vo-c"),
+                                                                        g("tsr", "object_rigid", "vo-c")], [-1, 1],
+                          both["tsr"], 2.6, "none"))
+    for text, outcome, a, b, paper, kind in (
+            ("VO-C - VO-B, TSR", "tsr", "vo-b", "vo-c", 11.4, "size"),
+            ("VT-C - VO-C, TSR", "tsr", "vo-c", "vt-c", -0.2, "none"),
+            ("VO-C - VO-B, DSR", "dsr", "vo-b", "vo-c", 11.2, "sign"),
+            ("VT-C - VT-B, DSR", "dsr", "vt-b", "vt-c", 7.0, "sign"),
+            ("VT-B - VO-B, TSR", "tsr", "vo-b", "vt-b", 10.8, "sign")):
+        out["3"].append(judge(text, [g(outcome, "object_soft", a), g(outcome, "object_soft", b)], [-1, 1],
+                              fam[outcome], paper, kind))
+    runs, names = (ood or {}).get("runs") or {}, (ood or {}).get("names") or {}
+    for text, outcome, paper in (("VT-C - VO-C, pooled OOD TSR", "tsr", 2.0),
+                                 ("VT-C - VO-C, pooled OOD TSR - DSR", "past_tolerance", 3.6)):
+        if "vo-c" in names and "vt-c" in names:
+            c = ood_interval(runs[names["vo-c"]][0], runs[names["vt-c"]][0], outcome, fam[outcome])
+            out["4"].append({"claim": text, "paper": paper, "kind": "sign", "verdict": verdict(c, paper, "sign"),
+                             "comparison": c.to_dict(), "seeds": [1, 1]})
+        else:
+            out["4"].append({"claim": text, "paper": paper, "kind": "sign", "verdict": "unresolved", "why": "not run",
+                             "comparison": None})
+    return out
+
+
+def misranking(parts: list[dict]) -> str:
+    """Completion misranks VO-B against VO-C when TSR ranks it higher and DSR lower, both resolved."""
+    return "supported" if all(p["verdict"] == "supported" for p in parts) else "unresolved"
+
+
+def build(policies: dict, ood: dict) -> tuple[str, dict]:
+    judged = claims(policies, ood)
+    verdicts = {}
+    for f, parts in judged.items():
+        if f == "1":  # the misranking is one claim of two parts
+            rest = [p["verdict"] for p in parts if not p["claim"].startswith("VO-B - VO-C")]
+            verdicts[f] = finding_verdict(rest + [misranking([p for p in parts if p["claim"].startswith("VO-B - VO-C")])])
+        else:
+            verdicts[f] = finding_verdict([p["verdict"] for p in parts])
+    lines = ["# The paper's findings by the pre-registered seed-level rule", "",
+             f"Generated by `python -m mani_skill_softvt.studies.seed_findings` (rule: docs/preregistration.md). "
+             f"Each seed is scored on the first {PER_TASK} ID episodes of each task; B - A over training seeds, "
+             f"Student's t with the seed variance pooled over the suite's recipes, {int(100 * (1 - ALPHA))} % intervals.",
+             "", "## Recipes: mean over training seeds", "",
+             "| suite | recipe | seeds | " + " | ".join(f"{n} mean [95% CI]; seeds" for n in OUTCOME_NAMES.values()) + " |",
+             "|---|---|---|---|---|---|"]
+    tables = {o: seed_table(policies, o) for o in OUTCOME_NAMES}
+    for key in sorted(tables["tsr"]):
+        cells = []
+        for o in OUTCOME_NAMES:
+            scores = tables[o][key]
+            fam = family(tables[o], (key[0],))
+            c = contrast([scores], [1.0], fam)
+            # A rate's interval is shown within [0, 100]; the t interval itself can pass them.
+            ci = f"[{max(0.0, c.ci95[0]):.1f}, {min(100.0, c.ci95[1]):.1f}]" if c.ci95 else "[no interval]"
+            cells.append(f"{np.mean(scores):.1f} {ci}; " + ", ".join(f"{x:.1f}" for x in scores))
+        lines.append(f"| {key[0]} | {key[1]} | {len(tables['tsr'][key])} | " + " | ".join(cells) + " |")
+    lines += ["", "## Claims", "", "| finding | claim (B - A, points) | seeds | ours [95% CI] | df | paper | kind | verdict |",
+              "|---|---|---|---|---|---|---|---|"]
+    for f, parts in judged.items():
+        for p in parts:
+            c = p.get("comparison")
+            ours = "-" if c is None else (f"{c['difference']:+.1f} " + (f"[{c['ci95'][0]:+.1f}, {c['ci95'][1]:+.1f}]"
+                                                                         if c["ci95"] else "[no interval]"))
+            lines.append(f"| {f} | {p['claim']} | {p.get('seeds', '-')} | {ours} | {c['df'] if c else '-'} | {p['paper']} "
+                         f"| {p['kind']} | {p['verdict']}{', ' + p['note'] if p.get('note') else ''}"
+                         f"{' (' + p['why'] + ')' if p.get('why') else ''} |")
+    lines += ["", "## Findings", "", "| finding | verdict |", "|---|---|"]
+    lines += [f"| {f} | {v} |" for f, v in verdicts.items()]
+    lines += ["", "Finding 1's misranking needs both of its parts supported (VO-B above VO-C on TSR, below it on DSR).",
+              "OOD claims: one run a recipe, clustered by initial state, with the ID family's seed variance added."]
+    return "\n".join(lines) + "\n", {"claims": judged, "verdicts": verdicts}
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("results", type=Path, nargs="?", default=Path("baselines/results"))
+    args = ap.parse_args(argv)
+    records = [r for suite in ("object_soft", "object_rigid")
+               for p in sorted(args.results.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
+    if not records:
+        ap.error(f"{args.results}: no ID records (object_soft_id_*.jsonl)")
+    text, data = build(by_policy(records), load_ood(args.results))
+    atomic_write(args.results / "seed_findings.md", lambda p: p.write_text(text))
+    atomic_write_json(args.results / "seed_findings.json", data)
+    print(text)
+    return data
+
+
+if __name__ == "__main__":
+    main()
