@@ -34,6 +34,15 @@ def atomic_write_json(path: Path, data) -> None:
     atomic_write(path, lambda p: p.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n"))
 
 
+def write_page(out_dir: Path, stem: str, text: str, data) -> Path:
+    """A study's page: ``<stem>.md`` (the markdown ``text``) and ``<stem>.json`` (``data``), each
+    written atomically; returns the markdown's path."""
+    md = Path(out_dir) / f"{stem}.md"
+    atomic_write(md, lambda p: p.write_text(text))
+    atomic_write_json(Path(out_dir) / f"{stem}.json", data)
+    return md
+
+
 class CorruptLogError(ValueError):
     """A line of a JSONL log that is not JSON and is not a torn last line."""
 

@@ -29,7 +29,7 @@ import numpy as np
 from ..calibration.cards import load_calibration_card
 from ..calibration.stats import by_closure, stable_grasps
 from ..data.demo_set import DemoSet
-from ..fileio import atomic_write, atomic_write_json, read_json
+from ..fileio import read_json, write_page
 from ..tasks.suites import NUM_TASKS, SUITES, task_spec
 
 # The screening's problems that concern the tolerance alone (data/trajectory.py: episode_problems);
@@ -157,8 +157,7 @@ def main(argv=None) -> dict:
     except ValueError as e:
         ap.error(str(e))
     text = build(result)
-    atomic_write(args.out / "binary_close.md", lambda p: p.write_text(text))
-    atomic_write_json(args.out / "binary_close.json", result)
+    write_page(args.out, "binary_close", text, result)
     print(text)
     return result
 

@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..evaluation.records import read_records
 from ..evaluation.seed_level import (ALPHA, contrast, episode_key, finding_verdict, first_per_task, ood_interval,
                                      outcome_of, pooled_variance, size_note, verdict)
-from ..fileio import atomic_write, atomic_write_json
-from .findings import POLICIES, by_policy, load_ood
+from ..fileio import write_page
+from .findings import POLICIES, load
 
 PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
 OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
@@ -164,13 +163,12 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("results", type=Path, nargs="?", default=Path("baselines/results"))
     args = ap.parse_args(argv)
-    records = [r for suite in ("object_soft", "object_rigid")
-               for p in sorted(args.results.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
-    if not records:
-        ap.error(f"{args.results}: no ID records (object_soft_id_*.jsonl)")
-    text, data = build(by_policy(records), load_ood(args.results))
-    atomic_write(args.results / "seed_findings.md", lambda p: p.write_text(text))
-    atomic_write_json(args.results / "seed_findings.json", data)
+    try:
+        found = load(args.results)  # the records the findings read, each verified
+    except ValueError as e:
+        ap.error(str(e))
+    text, data = build(found["policies"], found["ood"])
+    write_page(args.results, "seed_findings", text, data)
     print(text)
     return data
 
