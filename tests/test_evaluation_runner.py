@@ -88,3 +88,15 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
     assert policy_tag("runs/vo-c-cpu/policy.pt") == "vo-c-cpu" and policy_tag("ws://gpu:8000") == "ws_gpu_8000"
     assert records_stem("object_soft", "id", "x/snapshots/vo-c-long_step012000.pt") == "object_soft_id_vo-c-long_step012000"
 
+
+def test_evaluate_takes_every_control_mode_and_obs_mode_the_env_declares():
+    # The modes are declared once, by the env (tasks/robot.py, tasks/softvt_task.py); evaluation reads them.
+    from mani_skill_softvt.tasks.robot import CONTROL_MODES
+    from mani_skill_softvt.tasks.softvt_task import OBS_MODES
+
+    for mode in CONTROL_MODES:
+        assert RunConfig.resolve("random", control_mode=mode).control_mode == mode
+    for mode in OBS_MODES:
+        assert RunConfig.resolve("random", obs_mode=mode).obs_mode == mode
+    with pytest.raises(ValueError, match="--control-mode pd_bogus: choose one of .*pd_joint_pos"):
+        RunConfig.resolve("random", control_mode="pd_bogus")

@@ -81,3 +81,4 @@ def test_doubled_placement_ranges_put_the_object_twice_as_far_from_the_layout_ce
             env.reset(seed=0, options={"placement_scale": 3.0})
     finally:
         env.close()
+

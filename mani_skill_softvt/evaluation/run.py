@@ -17,14 +17,14 @@ from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
 from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs
+from ..tasks.robot import CONTROL_MODES
+from ..tasks.softvt_task import OBS_MODES
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
 from .protocols import episodes
 
-OBS_MODES = ("state_dict", "state", "rgb", "rgb+tactile", "none")
-# The paper's action space, and ManiSkill's delta modes, which its own baselines' checkpoints act in
-# (evaluation/maniskill_dp.py); the gripper in each mode's encoding (tasks/robot.py).
-CONTROL_MODES = ("pd_ee_pose", "pd_ee_pose_binary", "pd_ee_delta_pose", "pd_joint_delta_pos")
+# The modes are the env's, declared once where the env is (tasks/softvt_task.py, tasks/robot.py): every
+# obs mode it supports and every control mode it offers, the gripper in each mode's encoding.
 DEFAULT_TASKS = (0, 3, 8)
 
 
