@@ -219,12 +219,13 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
             raise ValueError(f"{demo_set.manifest}: the demos there were recorded under other physics "
                              f"({'; '.join(stale)}); generate into another --out, or move {demo_set.dir} away")
         numerics = recorded.get("numerics")
-        if any(demo_set.dir.glob("task*.h5")) and numerics != chosen_numerics().name:
-            raise ValueError(f"{demo_set.manifest}: the demos there were recorded under numerics "
-                             f"{numerics or 'of their machine, before the pins'}, this process runs "
-                             f"{chosen_numerics().name}; generate into another --out"
-                             + (f", or set SOFTVT_NUMERICS={numerics} to extend them" if numerics else
-                                " (to extend them, set SOFTVT_NUMERICS as their machine ran: docs/install.md)"))
+        if numerics is not None and numerics != chosen_numerics().name:
+            raise ValueError(f"{demo_set.manifest}: the demos there were recorded under numerics {numerics}, this "
+                             f"process runs {chosen_numerics().name}; generate into another --out, or set "
+                             f"SOFTVT_NUMERICS={numerics} to extend them")
+        if numerics is None and any(demo_set.dir.glob("task*.h5")):
+            print(f"note: {demo_set.manifest} names no numerics (a set from before the pins); the episodes recorded "
+                  f"now run under {chosen_numerics().name}")
     # Written first (a resumed run checks its physics), and again with the seeds actually drawn.
     _write_manifest(demo_set, tasks, planner, control_mode, physics_signature(), None if accepted else num)
     total = sum(accepted_demos_expected(demo_set, t, num, accepted) for t in tasks) if accepted else len(tasks) * num
