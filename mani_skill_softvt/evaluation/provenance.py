@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_json
+from ..numerics import machine_kind
 
 PROVENANCE_FILE = "provenance.json"
 
@@ -35,8 +36,8 @@ def machine(records: list[dict], entry: dict | None = None) -> str:
     for r in records:
         stack = (r.get("receipt") or {}).get("stack") or {}
         if stack.get("cpu"):
-            isa = " ".join(w for w in (stack.get("cpu-isa") or "").split()[1:] if not w.startswith("onednn_max="))
-            named.add(f"{stack['cpu']}{f' ({isa})' if isa else ''}")
+            cpu, flags = machine_kind(stack)  # the CPU's own flags, not what the numerics capped
+            named.add(f"{cpu}{' (' + ' '.join(flags) + ')' if flags else ''}")
     if named:
         return "; ".join(sorted(named))
     if entry and entry.get("cpu"):

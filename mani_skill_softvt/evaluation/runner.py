@@ -179,7 +179,8 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
     episodes = run.episodes() if episodes is None else episodes
     done = run_records(out, run)
     wanted = numerics or chosen_numerics().name
-    made = sorted({numerics_of(r, sidecar(out)) for r in done.values()} - {wanted})
+    known = sidecar(out) if done else None  # read once, not per record
+    made = sorted({numerics_of(r, known) for r in done.values()} - {wanted})
     if made:  # one file, one numerics: a reproduction replays a file under one
         raise ValueError(f"{out} holds records of this run made under numerics {', '.join(made)}, and this process "
                          f"runs {wanted}: evaluate into another --out, or set SOFTVT_NUMERICS={made[0]} to complete "
