@@ -50,13 +50,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--policy", default="expert",
                     help="expert | expert_cartesian | hold | random | module:Class (imports and runs that code "
                          "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "
-                         "needs --obs-mode rgb or rgb+tactile) | PATH/policy.pt (a trained Diffusion Policy "
+                         "needs an obs mode with rgb: rgb, rgbd, each +tactile) | PATH/policy.pt (a trained Diffusion Policy "
                          "baseline, mani_skill_softvt.baselines.train)")
     ap.add_argument("--tasks", nargs="+", default=[str(t) for t in DEFAULT_TASKS], help="task ids, or 'all'")
     ap.add_argument("--episodes-per-task", type=int, default=None, help="default 1")
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
-                    help="default: state_dict, or what a trained baseline (policy.pt) was trained on")
+                    help="any mode the env supports (mani_skill_softvt.observations: state, state_dict, rgb, depth, "
+                         "segmentation, rgbd, pointcloud, sensor_data, '+' combinations, each camera mode with "
+                         "+tactile); default: the policy's own (a trained baseline's, a policy class's obs_modes), "
+                         "else the env's, state")
     ap.add_argument("--camera-size", default=None, metavar="HxW",
                     help="render the cameras at HxW (default: the size the policy asks for, a trained baseline's "
                          "own, else 224x224); a policy server trained on smaller images needs it")

@@ -38,8 +38,8 @@ from .expert.solution import SOURCE_DESC, solve
 from .observations import info_bool
 from .parallel import run_tasks
 from .tasks import constants as C
+from .observations import ObsMode
 from .tasks.robot import CONTROL_MODES
-from .tasks.softvt_task import OBS_MODES
 from .tasks.suites import SUITES, parse_env_id, task_spec
 
 
@@ -100,8 +100,10 @@ def check_args(args) -> None:
         raise ValueError(f"--control-mode {args.control_mode}: the expert records one of {modes}; record in "
                          f"pd_joint_pos and convert with `python -m mani_skill_softvt.replay --traj-path FILE.h5 -c "
                          f"{args.control_mode}`")
-    if args.obs_mode not in OBS_MODES:
-        raise ValueError(f"-o {args.obs_mode}: choose one of {OBS_MODES}")
+    try:
+        ObsMode.parse(args.obs_mode)  # the env's modes (mani_skill_softvt.observations)
+    except ValueError as e:
+        raise ValueError(f"-o: {e}") from None
 
 
 def make_recorder(env_id: str, task_id: int, output_dir: Path, traj_name: str, *, obs_mode: str = "none",

@@ -15,7 +15,7 @@ the baselines and the LeRobot export store them), one frame is:
 | ``tactile/<side>/depth`` | (240, 320) gel indentation, micrometres | int16 | ``rgb+tactile`` |
 | ``tactile/<side>/marker_initial``, ``.../marker_current`` | (99, 2) marker pixels at rest, now | float32 | ``rgb+tactile`` |
 
-(``state`` is the same proprioception flattened into one vector; camera sizes follow the env's
+(``state`` is the same proprioception flattened into one vector, :data:`STATE_LAYOUT`; camera sizes follow the env's
 ``sensor_configs``: :func:`camera_sensor_configs` renders both cameras at another size, e.g. the
 84x84 a CPU policy takes, instead of rendering 224x224 and shrinking.) The instruction is ``env.unwrapped.instruction``, never an observation.
 
@@ -29,15 +29,88 @@ either form.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 CAMERAS = ("base_camera", "hand_camera")  # third-person, wrist
+TACTILE_SUFFIX = "+tactile"  # "<camera mode>+tactile": the camera mode plus both fingers' GelSight
+# ManiSkill's camera textures (mani_skill.envs.utils.observations.ALL_VISUAL_TEXTURES), and its named
+# modes that stand for sets of them (parse_obs_mode_to_struct): one vocabulary with ManiSkill's.
+TEXTURES = ("rgb", "depth", "segmentation", "position", "normal", "albedo")
+NAMED_TEXTURE_MODES = {"rgbd": ("rgb", "depth"), "pointcloud": ("rgb", "position", "segmentation"),
+                       "sensor_data": ("rgb", "depth", "segmentation", "position")}
+STATE_PARTS = ("state", "state_dict")  # "+state": the proprioception flattened beside the images
+# The modes named in help texts and docs; any "+" combination of TEXTURES (with "+state" or "+tactile")
+# is accepted as well (ObsMode.parse).
+OBS_MODES = ("state", "state_dict", "none", "rgb", "rgb+tactile", "depth", "depth+tactile", "rgbd", "rgbd+tactile",
+             "rgb+depth+segmentation", "rgb+depth+segmentation+tactile", "pointcloud", "pointcloud+tactile",
+             "sensor_data", "sensor_data+tactile")
+DEFAULT_OBS_MODE = "state"  # ManiSkill's default: the first of an env's SUPPORTED_OBS_MODES
 SIDES = ("left", "right")  # the fingers, each with a GelSight
 MARKER_FIELDS = ("marker_initial", "marker_current")
 TACTILE_FIELDS = ("rgb", "depth", *MARKER_FIELDS)
 QPOS, QVEL = "agent/qpos", "agent/qvel"
 TCP_POSE, GRIPPER_WIDTH = "extra/tcp_pose", "extra/gripper_width"
+# The flat ``state`` vector (obs mode ``state``; ``state`` of a "+state" mode): ManiSkill flattens
+# ``agent`` then ``extra`` in this order.
+STATE_LAYOUT = ((QPOS, 9), (QVEL, 9), (TCP_POSE, 7), (GRIPPER_WIDTH, 1))
 NATIVE_CAMERA_SIZE = (224, 224)  # (height, width) of both cameras by default (the paper's views)
+
+
+@dataclass(frozen=True)
+class ObsMode:
+    """An obs mode, parsed: ``camera`` is the part ManiSkill parses (``rgbd``, ``pointcloud``,
+    ``rgb+depth+state``, ``state``...), ``tactile`` whether "+tactile" adds both GelSights, ``textures``
+    the camera textures it renders. The one place that says what a mode name means here."""
+
+    name: str
+    camera: str
+    tactile: bool
+    textures: frozenset
+
+    @classmethod
+    def parse(cls, obs_mode: str | None) -> "ObsMode":
+        """``obs_mode`` checked; ValueError naming it and what to give instead."""
+        name = DEFAULT_OBS_MODE if obs_mode is None else obs_mode
+        camera = name.removesuffix(TACTILE_SUFFIX)
+        parts = camera.split("+")
+        textures = set()
+        for part in parts:
+            if part in NAMED_TEXTURE_MODES and len(parts) == 1 or part == "pointcloud":
+                textures.update(NAMED_TEXTURE_MODES[part])
+            elif part in TEXTURES:
+                textures.add(part)
+            elif part not in STATE_PARTS and not (part == "none" and len(parts) == 1):
+                raise ValueError(f"obs_mode '{name}': '{part}' is not an obs mode or camera texture; give one of "
+                                 f"{', '.join(OBS_MODES)}, or a '+' combination of {', '.join(TEXTURES)} (with "
+                                 "'+state', and '+tactile' last)")
+        if name.endswith(TACTILE_SUFFIX) and not textures:
+            raise ValueError(f"obs_mode '{name}': touch comes with camera images (e.g. 'rgb+tactile', "
+                             f"'pointcloud+tactile'); the state modes are proprioception only")
+        return cls(name, camera, name.endswith(TACTILE_SUFFIX), frozenset(textures))
+
+    @property
+    def images(self) -> bool:
+        """Whether the cameras render (any texture)."""
+        return bool(self.textures)
+
+    @property
+    def pointcloud(self) -> bool:
+        """Whether the cameras' textures become one world-frame point cloud (ManiSkill's ``pointcloud``)."""
+        return "pointcloud" in self.camera.split("+")
+
+    @property
+    def shader_pack(self) -> str:
+        """The cameras' shader: ManiSkill's ``minimal`` (colour, position, segmentation, depth) unless the
+        mode asks for ``normal`` or ``albedo``, which only its ``default`` pack renders (its colour is
+        shaded differently: an ``rgb+normal`` image is not an ``rgb`` one)."""
+        return "default" if self.textures & {"normal", "albedo"} else "minimal"
+
+    @property
+    def raw(self) -> bool:
+        """``sensor_data``: the renderer's raw textures (ManiSkill applies no texture transforms)."""
+        return self.camera == "sensor_data"
 
 
 def camera_sensor_configs(camera_size: tuple[int, int] | None) -> dict:
@@ -69,9 +142,9 @@ def camera_size_name(camera_size: tuple[int, int] | None) -> str:
     return f"{h}x{w}"
 
 
-def camera_key(camera: str) -> str:
-    """Flat key of a camera's RGB image."""
-    return f"sensor_data/{camera}/rgb"
+def camera_key(camera: str, texture: str = "rgb") -> str:
+    """Flat key of a camera's image (``texture``: rgb, depth, segmentation...)."""
+    return f"sensor_data/{camera}/{texture}"
 
 
 def tactile_key(side: str, field: str) -> str:
@@ -118,12 +191,26 @@ def nest(flat: dict) -> dict:
     return out
 
 
-def lookup(obs: dict, key: str) -> np.ndarray:
-    """The value at flat ``key`` of a nested observation, unbatched; KeyError naming the key."""
+def state_slice(key: str) -> slice:
+    """Where ``key`` (``agent/qpos`` ... ``extra/gripper_width``) lies in the flat ``state`` vector."""
+    start = 0
+    for name, size in STATE_LAYOUT:
+        if name == key:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(key)
+
+
+def lookup(obs, key: str) -> np.ndarray:
+    """The value at flat ``key`` of an observation, unbatched; KeyError naming the key. A proprioceptive
+    key is also read from the flat state (obs mode ``state``, or ``obs["state"]`` of a "+state" mode)."""
     node = obs
     for part in key.split("/"):
         if not isinstance(node, dict) or part not in node:
-            raise KeyError(key)
+            flat = obs.get("state") if isinstance(obs, dict) else obs
+            if flat is None or isinstance(flat, dict) or key not in dict(STATE_LAYOUT):
+                raise KeyError(key)
+            return unbatch(flat)[..., state_slice(key)]
         node = node[part]
     return unbatch(node)
 

@@ -6,6 +6,7 @@ Every flag is ManiSkill's own, handed over unchanged (``--traj-path``, ``-o``, `
 
     python -m mani_skill_softvt.replay --traj-path demos/sample/object_soft/task3.h5 \\
         --use-env-states -o rgb+tactile --save-traj
+    python -m mani_skill_softvt.replay --traj-path FILE.h5 --use-env-states -o pointcloud+tactile --save-traj
     python -m mani_skill_softvt.replay --traj-path FILE.h5 -c pd_ee_delta_pose -o rgb --save-traj
 
 Output goes beside the input as ``<name>.<obs_mode>.<control_mode>.physx_cpu.h5`` + ``.json``
@@ -52,6 +53,7 @@ from .data.trajectory import (
     upgrade_gripper_actions,
 )
 from .fileio import atomic_write_json, read_json
+from .observations import ObsMode
 from .physics.transforms import quat_to_rotvec
 from .tasks.robot import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
 from .tasks.suites import parse_env_id, recorded_env_id
@@ -213,6 +215,11 @@ def main(argv: list[str] | None = None) -> None:
         return upgrade(argv[1:])
 
     args = replay_trajectory.parse_args(argv)
+    if args.obs_mode is not None:
+        try:
+            ObsMode.parse(args.obs_mode)  # the env's modes, before ManiSkill makes an env
+        except ValueError as e:
+            _refuse(f"-o: {e}")
     meta = check_input(args.traj_path, args.target_control_mode)
     kwargs = meta["env_info"]["env_kwargs"]
     if args.target_control_mode is not None:

@@ -60,6 +60,9 @@ def from_openpi_observation(request: dict) -> tuple[dict, str]:
     instruction = str(request[PROMPT_KEY])
     flat = {QPOS: _batched(request[QPOS_KEY], np.float32), TCP_POSE: _batched(request[TCP_POSE_KEY], np.float32),
             **{camera_key(cam): _batched(request[key], np.uint8) for key, cam in CAMERAS.items()}}
+    for key, cam in CAMERAS.items():
+        if depth_wire_key(key) in request:  # rgbd modes
+            flat[camera_key(cam, "depth")] = _batched(request[depth_wire_key(key)], np.int16)
     if tactile_wire_key(SIDES[0]) in request:
         for side in SIDES:
             flat[tactile_key(side, "rgb")] = _batched(request[tactile_wire_key(side)], np.uint8)

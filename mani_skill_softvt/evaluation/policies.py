@@ -34,7 +34,7 @@ from ..tasks.robot import base_frame_pose
 
 POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
 REMOTE_PREFIXES = ("ws://", "wss://")
-IMAGE_OBS_MODES = ("rgb", "rgb+tactile")
+IMAGE_OBS_MODES = ("rgb", "rgb+tactile", "rgbd", "rgbd+tactile")  # what a policy server is sent (remote.py)
 
 
 @dataclass(frozen=True)
@@ -193,12 +193,11 @@ def load_policy(spec: str) -> Policy:
 
 
 def _tcp_action(obs, closure: float) -> np.ndarray:
-    """An action holding the TCP pose read from the observation (state_dict / rgb modes)."""
+    """An action holding the TCP pose read from the observation (any obs mode but none)."""
     try:
         pose = lookup(obs, TCP_POSE).reshape(-1)[:7]
     except (KeyError, TypeError):
-        raise ValueError(f"this policy reads the observation's {TCP_POSE}: use obs_mode state_dict, rgb or "
-                         "rgb+tactile") from None
+        raise ValueError(f"this policy reads the observation's {TCP_POSE}: use any obs mode but none") from None
     return np.concatenate([base_frame_pose(pose), [closure]]).astype(np.float32)
 
 

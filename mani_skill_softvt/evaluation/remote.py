@@ -12,6 +12,9 @@ Observation schema (LIBERO-style keys, so an openpi LIBERO policy reads it uncha
 
 - ``observation/image``: (H, W, 3) uint8, the third-person ``base_camera``;
 - ``observation/wrist_image``: (H, W, 3) uint8, the wrist ``hand_camera``;
+- ``rgbd`` and ``rgbd+tactile`` only: ``observation/image_depth`` and ``observation/wrist_image_depth``,
+  (H, W, 1) int16, each camera's depth in millimetres along its optical axis (ManiSkill's depth;
+  0 where nothing was hit), the pixels of the image beside it;
 - ``observation/state``: (8,) float32, TCP xyz in the robot base frame, TCP axis-angle, the two
   finger joint positions;
 - ``prompt``: str, the instruction;
@@ -65,6 +68,11 @@ def tactile_wire_key(side: str, suffix: str = "") -> str:
     return f"observation/tactile_{side}" + (f"_{suffix}" if suffix else "")
 
 
+def depth_wire_key(image_key: str) -> str:
+    """Wire key of a camera's depth image: its colour image's key with ``_depth``."""
+    return f"{image_key}_depth"
+
+
 EPISODE_RESET, EPISODE_SEED = "episode/reset", "episode/seed"
 
 
@@ -80,11 +88,14 @@ def base_frame_state(tcp_pose_world: np.ndarray, finger_qpos: np.ndarray) -> np.
 def to_openpi_observation(obs: dict, instruction: str) -> dict:
     """An env observation (obs mode ``rgb`` or ``rgb+tactile``) as an openpi request (see module doc)."""
     if not isinstance(obs, dict) or "sensor_data" not in obs:
-        raise ValueError("a remote policy needs camera images: evaluate with obs_mode 'rgb' or 'rgb+tactile' "
+        raise ValueError("a remote policy needs camera images: evaluate with obs_mode rgb, rgbd, or either +tactile "
                          f"(got an observation with keys {sorted(obs) if isinstance(obs, dict) else type(obs)})")
     qpos = lookup(obs, QPOS).astype(np.float32)
     tcp_pose = lookup(obs, TCP_POSE).astype(np.float32)
     out = {key: np.ascontiguousarray(lookup(obs, camera_key(cam))) for key, cam in CAMERAS.items()}
+    for key, cam in CAMERAS.items():
+        if "depth" in obs["sensor_data"][cam]:
+            out[depth_wire_key(key)] = np.ascontiguousarray(lookup(obs, camera_key(cam, "depth")))
     out.update({"observation/state": base_frame_state(tcp_pose, qpos[-2:]), QPOS_KEY: qpos,
                 TCP_POSE_KEY: tcp_pose, PROMPT_KEY: str(instruction)})
     for side in SIDES if "tactile" in obs else ():

@@ -16,15 +16,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
-from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs
+from ..observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs
 from ..tasks.robot import CONTROL_MODES
-from ..tasks.softvt_task import OBS_MODES
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
 from .protocols import episodes
 
-# The modes are the env's, declared once where the env is (tasks/softvt_task.py, tasks/robot.py): every
-# obs mode it supports and every control mode it offers, the gripper in each mode's encoding.
+# The modes are the env's, declared once: every obs mode it supports (observations.ObsMode, what the
+# env parses its obs_mode with) and every control mode it offers (tasks/robot.py), the gripper in each
+# mode's encoding.
 DEFAULT_TASKS = (0, 3, 8)
 
 
@@ -46,7 +46,7 @@ def records_stem(suite: str, protocol: str, spec: str) -> str:
 def recorded_camera_size(obs_mode: str, camera_size: tuple[int, int] | None) -> list[int] | None:
     """The ``camera_size`` a record of a run in ``obs_mode`` carries: the cameras' (height, width),
     the native 224x224 unless asked otherwise; None in obs modes without images."""
-    return [int(v) for v in (camera_size or NATIVE_CAMERA_SIZE)] if str(obs_mode).startswith("rgb") else None
+    return [int(v) for v in (camera_size or NATIVE_CAMERA_SIZE)] if ObsMode.parse(obs_mode).images else None
 
 
 @dataclass(frozen=True)
@@ -71,13 +71,16 @@ class RunConfig:
         """The run, validated; ValueError naming the value that cannot be (the CLI prints it)."""
         source = policy if isinstance(policy, PolicySource) else resolve_policy(policy)
         spec = source.spec
-        obs_mode = obs_mode or (source.obs_modes[0] if source.obs_modes and len(source.obs_modes) == 1
-                                else "state_dict")
+        obs_mode = obs_mode or (source.obs_modes or (DEFAULT_OBS_MODE,))[0]  # the policy's first, or the env's
         control_mode = control_mode or (source.control_modes or ("pd_ee_pose",))[0]
-        for flag, given, allowed, known in (("--obs-mode", obs_mode, source.obs_modes, OBS_MODES),
-                                            ("--control-mode", control_mode, source.control_modes, CONTROL_MODES)):
-            if given not in known:
-                raise ValueError(f"{flag} {given}: choose one of {', '.join(known)}")
+        try:
+            ObsMode.parse(obs_mode)
+        except ValueError as e:
+            raise ValueError(f"--obs-mode {e}") from None
+        if control_mode not in CONTROL_MODES:
+            raise ValueError(f"--control-mode {control_mode}: choose one of {', '.join(CONTROL_MODES)}")
+        for flag, given, allowed in (("--obs-mode", obs_mode, source.obs_modes),
+                                     ("--control-mode", control_mode, source.control_modes)):
             if allowed and given not in allowed:
                 need = " or ".join(allowed)
                 raise ValueError(f"{spec} runs with {flag} {need}, not {given}; evaluate it with {flag} {need} "

@@ -70,7 +70,7 @@ def is_run_record(rec: dict, fields: dict, policy_sha256: str | None) -> bool:
 
 def camera_size_of(env) -> list[int] | None:
     """(height, width) the env's cameras render at, None in obs modes without images."""
-    sensors = env.scene.sensors if "rgb" in env.obs_mode else {}
+    sensors = env.scene.sensors if env.obs_mode_spec.images else {}
     cameras = [sensors[c] for c in CAMERAS if c in sensors]
     return [int(cameras[0].config.height), int(cameras[0].config.width)] if cameras else None
 

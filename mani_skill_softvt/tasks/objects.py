@@ -17,6 +17,7 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.utils.common import to_numpy
+from mani_skill.utils.structs.actor import Actor
 
 from ..assets.cards import read_obj
 from ..assets.materials import SoftMaterial
@@ -123,6 +124,15 @@ class SceneObjects:
     def update_render(self) -> None:
         pass
 
+    def segmentation_actors(self) -> dict:
+        """Segmentation id -> ManiSkill Actor of what the cameras see of each object that is not
+        already one of the scene's actors (ManiSkill's ``segmentation_id_map`` holds those)."""
+        return {}
+
+    def drawn_surface(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World vertices and triangles of ``name`` as the cameras draw it now (evaluator-only)."""
+        raise NotImplementedError
+
     # --- reading
     def nodes(self, name: str) -> np.ndarray:
         raise NotImplementedError
@@ -220,6 +230,12 @@ class RigidTwins(SceneObjects):
 
     def connect(self, robot, table, props) -> None:
         self.robot = robot
+
+    def drawn_surface(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        spec, pose = self.specs[name], self.bodies[name].pose7()
+        parts = [read_obj(path) for path, _ in spec.visual_files]
+        v, f = join_meshes([(rigid_nodes(rigid_nodes(v, np.asarray(spec.rest_pose)), pose), f) for v, f in parts])
+        return v, f
 
     def scale(self, youngs_modulus: float, mass: float) -> None:
         for obj in self.bodies.values():
@@ -406,14 +422,29 @@ class FEMObjects(SceneObjects):
         self.world.check_health()
         self.update_render()
 
+    def _drawn_parts(self, name: str):
+        """(vertices, faces, rgba) of each visual part of ``name`` at the current nodes."""
+        nodes = self.world.particle_q(self.index[name])
+        tets = self.specs[name].tets
+        for faces, rgba, tet_idx, weights in self.visuals[name]:
+            # Barycentric embedding: each visual vertex follows the tet it lies in.
+            yield np.einsum("vk,vkd->vd", weights, nodes[tets[tet_idx]]).astype(np.float32), faces, rgba
+
+    def drawn_surface(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        parts = list(self._drawn_parts(name))
+        return join_meshes([(v, f) for v, f, _ in parts])
+
+    def segmentation_actors(self) -> dict:
+        # The drawn surface is a render body on an entity of its own (no PhysX body: the FEM moves
+        # it); wrapped as a ManiSkill Actor so that the map's users find it as they find any actor.
+        return {entity.per_scene_id: Actor.create_from_entities([entity], self.scene, torch.zeros(1, dtype=torch.int),
+                                                                shared_name=name)
+                for name, entity in self.render_entities.items()}
+
     def update_render(self) -> None:
         for name, entity in self.render_entities.items():
-            nodes = self.world.particle_q(self.index[name])
-            tets = self.specs[name].tets
             body = sapien.render.RenderBodyComponent()
-            for faces, rgba, tet_idx, weights in self.visuals[name]:
-                # Barycentric embedding: each visual vertex follows the tet it lies in.
-                verts = np.einsum("vk,vkd->vd", weights, nodes[tets[tet_idx]]).astype(np.float32)
+            for verts, faces, rgba in self._drawn_parts(name):
                 body.attach(sapien.render.RenderShapeTriangleMesh(
                     vertices=verts,
                     triangles=faces.astype(np.uint32),

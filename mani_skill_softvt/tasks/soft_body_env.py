@@ -31,16 +31,19 @@ and :meth:`SoftBodyEnv.evaluator_state`, never through observations.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import sapien
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.envs.utils.observations import sensor_data_to_pointcloud
 from mani_skill.sensors.camera import Camera, CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.common import to_numpy
 from mani_skill.utils.structs.types import SimConfig
 
-from ..observations import SIDES
+from ..observations import SIDES, ObsMode
 from ..physics.deformation import deformation
 from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.geometry import contact_polygons, polygons_mask
@@ -55,13 +58,15 @@ from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
 RESET_OPTIONS = frozenset({"ood", *FACTOR_OPTIONS, "reconfigure", "env_idx", "reset_to_env_states"})
 # Resets between scene rebuilds: 1, every episode starts in a scene built for it (see __init__).
 RECONFIGURATION_FREQ = 1
-TACTILE_SUFFIX = "+tactile"  # obs modes "rgb+tactile" etc.: the camera mode plus both fingers' GelSight
 
 
 class SoftBodyEnv(BaseEnv):
     """ManiSkill env with Newton FEM soft bodies. CPU simulation, one env per process."""
 
     SUPPORTED_ROBOTS = ["panda_softvt"]
+    # ManiSkill's: every camera texture and its combinations, point clouds and raw sensor data, each
+    # also with "+tactile" (mani_skill_softvt.observations.ObsMode); the first is the default.
+    SUPPORTED_OBS_MODES = ("state", "state_dict", "none", "sensor_data", "any_textures", "pointcloud")
     agent: PandaSoftVT
 
     def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, soft_sleep: bool = True,
@@ -92,11 +97,11 @@ class SoftBodyEnv(BaseEnv):
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
         self._lights, self._ambient = [], None  # the scene's lights at nominal intensity (set when loaded)
-        obs_mode = obs_mode or "state"
-        self.tactile_enabled = obs_mode.endswith(TACTILE_SUFFIX)
-        super().__init__(*args, robot_uids=robot_uids, obs_mode=obs_mode.removesuffix(TACTILE_SUFFIX), **kwargs)
-        # ManiSkill parsed the camera part ("rgb"); the public name keeps "+tactile".
-        self._obs_mode = obs_mode
+        self.obs_mode_spec = ObsMode.parse(obs_mode)  # ValueError naming a mode that is not one
+        self.tactile_enabled = self.obs_mode_spec.tactile
+        super().__init__(*args, robot_uids=robot_uids, obs_mode=self.obs_mode_spec.camera, **kwargs)
+        # ManiSkill parsed the camera part ("rgbd"); the public name keeps "+tactile".
+        self._obs_mode = self.obs_mode_spec.name
 
     # ------------------------------------------------------------------ config
     @property
@@ -108,7 +113,8 @@ class SoftBodyEnv(BaseEnv):
     def _default_sensor_configs(self):
         # Third-person view of the workspace at the policy resolution.
         pose = sapien_utils.look_at(eye=[0.35, 0.0, 0.45], target=[-0.1, 0.0, 0.05])
-        return [CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, np.pi / 2, 0.01, 100)]
+        return [CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, np.pi / 2, 0.01, 100,
+                             shader_pack=self.obs_mode_spec.shader_pack)]
 
     @property
     def _default_human_render_camera_configs(self):
@@ -163,6 +169,27 @@ class SoftBodyEnv(BaseEnv):
     def get_sensor_params(self):
         # Tactile sensors have no camera parameters: keep sensor_param to the cameras' entries.
         return {k: v for k, v in super().get_sensor_params().items() if v}
+
+    def get_obs(self, info: dict | None = None, unflattened: bool = False):
+        # ManiSkill's get_obs, for a mode name that may end in "+tactile": raw textures in sensor_data
+        # modes, and the cameras' point cloud whenever the mode names one ("pointcloud+tactile",
+        # "rgb+pointcloud"), from the cameras only (the GelSights are sensors without pixels in space).
+        mode = self.obs_mode_spec
+        if not mode.images:
+            return super().get_obs(info, unflattened)
+        obs = self._get_obs_with_sensor_data(self.get_info() if info is None else info,
+                                             apply_texture_transforms=not mode.raw)
+        if mode.pointcloud and obs["sensor_data"]:
+            cameras = {uid: s for uid, s in self._sensors.items() if isinstance(s, Camera)}
+            obs = sensor_data_to_pointcloud(obs, cameras)
+        return obs if unflattened else self._flatten_raw_obs(obs)
+
+    @cached_property
+    def segmentation_id_map(self):
+        """ManiSkill's map of segmentation ids to actors and links, with each soft object's drawn
+        surface (one id per object, stable over the episode, named as its rigid twin is:
+        ``object``, ``left``, ``right``). ManiSkill forgets it at each reconfiguration."""
+        return {**BaseEnv.segmentation_id_map.func(self), **self.objects.segmentation_actors()}
 
     def _get_obs_with_sensor_data(self, info, apply_texture_transforms=True):
         obs = super()._get_obs_with_sensor_data(info, apply_texture_transforms)
@@ -444,6 +471,11 @@ class SoftBodyEnv(BaseEnv):
     def settled_nodes(self, name: str | None = None) -> np.ndarray:
         """x_0: the nodes after the settle before the episode (world frame). Evaluator-only."""
         return self._x0[self.object_names[self._index(name)]]
+
+    def drawn_surface(self, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Evaluator-only: world vertices and triangles of ``name`` as the cameras draw it now (a soft
+        object's visual meshes carried by its FEM nodes; a twin's at its pose)."""
+        return self.objects.drawn_surface(self.object_names[self._index(name)])
 
     def deformation(self, name: str | None = None) -> float:
         """D_t of a soft object against its settled nodes x_0. Evaluator-only."""

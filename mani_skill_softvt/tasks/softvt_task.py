@@ -22,13 +22,18 @@ height band. The other instance in the target does not count.
 **Failure (early termination):** ``dropped``: the object fell while not held outside the
 target (downward centroid speed above 0.25 m/s), or left the table.
 
-**Observation** (``obs_mode``): ``state`` (flat proprioception), ``state_dict``, ``rgb``
-(third-person ``base_camera`` and wrist ``hand_camera`` at 224x224) and ``rgb+tactile`` (plus
-both fingers' GelSight images and marker fields). ``agent`` holds joint positions/velocities,
+**Observation** (``obs_mode``): every mode ManiSkill parses. ``state`` (the default: flat
+proprioception), ``state_dict``, ``none``; the cameras (third-person ``base_camera`` and wrist
+``hand_camera`` at 224x224) in ``rgb``, ``depth`` (int16 mm), ``segmentation`` (int16 ids of the
+env's ``segmentation_id_map``; each soft object one id, named as its rigid twin), ``position``,
+``normal``, their ``+`` combinations (with ``+state``), ``rgbd``, ``pointcloud`` (world ``xyzw``,
+``rgb``, ``segmentation``) and ``sensor_data``; each camera mode also with ``+tactile`` (both
+fingers' GelSight images and marker fields). The soft objects are drawn as they are each step, so
+their depth, points and masks follow the squeeze. ``agent`` holds joint positions/velocities,
 ``extra`` the TCP pose and the jaw width. Observations are arrays only: the instruction is the
 env's (:attr:`SoftVTTaskEnv.instruction`). Nothing evaluator-only (FEM nodes, object poses,
 deformation, materials) is in any mode; the evaluator reads the env's evaluator-only accessors
-(:meth:`SoftBodyEnv.evaluator_state`).
+(:meth:`SoftBodyEnv.evaluator_state`). The contract: :mod:`mani_skill_softvt.observations`.
 
 **Action** (``control_mode``): ``pd_ee_pose`` (the default; 7-D: absolute TCP position in the robot
 base frame, axis-angle orientation, gripper closure in [0, 1]), ManiSkill's ``pd_ee_delta_pose`` (7-D),
@@ -75,13 +80,10 @@ from .robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
 from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
 from .suites import NUM_TASKS, SUITES, TaskSpec, swapped_side, task_spec
 
-OBS_MODES = ("state", "state_dict", "rgb", "rgb+tactile", "none")
-
 
 class SoftVTTaskEnv(SoftBodyEnv):
     """Pick-and-place of a soft (or rigid-twin) object named by a language instruction."""
 
-    SUPPORTED_OBS_MODES = OBS_MODES
     # ManiSkill's default reward mode is the first: sparse, the benchmark's success.
     SUPPORTED_REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
 
@@ -109,9 +111,6 @@ class SoftVTTaskEnv(SoftBodyEnv):
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self.calibration_dir = CALIBRATION_DIR if calibration_dir is None else calibration_dir
         self._calibration_card = None  # loaded on first use (the DSR scorer, the expert, the dense reward)
-        obs_mode = obs_mode or "state"
-        if obs_mode not in OBS_MODES:
-            raise ValueError(f"obs_mode '{obs_mode}' is not supported; choose one of {OBS_MODES}")
         super().__init__(*args, obs_mode=obs_mode, **kwargs)
 
     @property
@@ -166,10 +165,12 @@ class SoftVTTaskEnv(SoftBodyEnv):
         pose = sapien_utils.look_at(eye=C.BASE_CAMERA_EYE, target=C.BASE_CAMERA_TARGET)
         hand = self.agent.robot.links_map["camera_link"] if "camera_link" in self.agent.robot.links_map \
             else self.agent.robot.links_map["panda_hand"]
+        shader = self.obs_mode_spec.shader_pack
         return [
-            CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, C.BASE_CAMERA_FOV, 0.01, 100),
+            CameraConfig("base_camera", pose, C.CAMERA_SIZE, C.CAMERA_SIZE, C.BASE_CAMERA_FOV, 0.01, 100,
+                         shader_pack=shader),
             CameraConfig("hand_camera", sapien.Pose(p=C.WRIST_CAMERA_OFFSET, q=C.WRIST_CAMERA_Q), C.CAMERA_SIZE,
-                         C.CAMERA_SIZE, np.pi / 2, 0.01, 100, mount=hand),
+                         C.CAMERA_SIZE, np.pi / 2, 0.01, 100, mount=hand, shader_pack=shader),
         ]
 
     @property
