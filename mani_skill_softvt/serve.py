@@ -36,6 +36,7 @@ from .evaluation.remote import (
     QPOS_KEY,
     TACTILE_MARKERS,
     TCP_POSE_KEY,
+    depth_wire_key,
     tactile_wire_key,
 )
 from .observations import QPOS, SIDES, TCP_POSE, camera_key, nest, tactile_key

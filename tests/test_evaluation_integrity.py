@@ -111,7 +111,7 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
         assert r["termination"] == termination and (message is None) == (r["error"] is None), (b, r["termination"])
         assert message is None or message in r["error"], (b, r["error"])
         assert not r["success"] and not r["dsr_success"]
-        assert (r["policy"], r["obs_mode"], r["control_mode"]) == (SPEC, "state_dict", "pd_ee_pose")
+        assert (r["policy"], r["obs_mode"], r["control_mode"]) == (SPEC, "state", "pd_ee_pose")  # the env's default mode
         assert r["record_sha256"] == record_hash(r)
     # Policies that behaved for two single-step chunks first: exactly two steps were executed.
     assert got["raise_in_act"]["steps"] == got["nan"]["steps"] == 2 and got["raise_in_reset"]["steps"] == 0

@@ -114,7 +114,7 @@ def test_openpi_observation_schema(tactile):
 
 
 def test_openpi_observation_needs_cameras():
-    with pytest.raises(ValueError, match="obs_mode 'rgb'"):
+    with pytest.raises(ValueError, match="obs_mode rgb, rgbd"):
         to_openpi_observation({"agent": {}, "extra": {}}, "x")
 
 
@@ -304,3 +304,20 @@ def test_a_server_whose_policy_takes_smaller_cameras_says_so_and_a_mismatch_is_a
             cam["rgb"] = cam["rgb"][:, :84, :84]
         assert remote.act(small).shape[1] == 7
         remote.close()
+
+
+def test_camera_depth_travels_beside_its_image_and_back():
+    """rgbd modes: each camera's int16 millimetre depth goes as ``<image key>_depth``, and a project
+    policy served by serve.py reads it back under the env's key, bit for bit."""
+    from mani_skill_softvt.serve import from_openpi_observation
+
+    obs = _obs(tactile=True)
+    rng = np.random.default_rng(1)
+    for cam in ("base_camera", "hand_camera"):
+        obs["sensor_data"][cam]["depth"] = torch.from_numpy(rng.integers(0, 3000, (1, 224, 224, 1), dtype=np.int16))
+    req = to_openpi_observation(obs, "x")
+    for key, cam in (("observation/image", "base_camera"), ("observation/wrist_image", "hand_camera")):
+        assert req[f"{key}_depth"].dtype == np.int16 and req[f"{key}_depth"].shape == (224, 224, 1)
+    back, _ = from_openpi_observation(req)
+    for cam in ("base_camera", "hand_camera"):
+        np.testing.assert_array_equal(back["sensor_data"][cam]["depth"].numpy(), obs["sensor_data"][cam]["depth"].numpy())

@@ -94,8 +94,10 @@ def to_openpi_observation(obs: dict, instruction: str) -> dict:
     tcp_pose = lookup(obs, TCP_POSE).astype(np.float32)
     out = {key: np.ascontiguousarray(lookup(obs, camera_key(cam))) for key, cam in CAMERAS.items()}
     for key, cam in CAMERAS.items():
-        if "depth" in obs["sensor_data"][cam]:
+        try:  # rgbd modes
             out[depth_wire_key(key)] = np.ascontiguousarray(lookup(obs, camera_key(cam, "depth")))
+        except KeyError:
+            pass
     out.update({"observation/state": base_frame_state(tcp_pose, qpos[-2:]), QPOS_KEY: qpos,
                 TCP_POSE_KEY: tcp_pose, PROMPT_KEY: str(instruction)})
     for side in SIDES if "tactile" in obs else ():
