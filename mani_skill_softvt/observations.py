@@ -15,6 +15,16 @@ the baselines and the LeRobot export store them), one frame is:
 | ``tactile/<side>/depth`` | (240, 320) gel indentation, micrometres | int16 | ``rgb+tactile`` |
 | ``tactile/<side>/marker_initial``, ``.../marker_current`` | (99, 2) marker pixels at rest, now | float32 | ``rgb+tactile`` |
 
+The camera modes beyond ``rgb`` (:class:`ObsMode`) add, per camera, ManiSkill's textures:
+``sensor_data/<camera>/depth`` (H, W, 1) int16 mm, ``.../segmentation`` (H, W, 1) int16 ids of the
+env's ``segmentation_id_map``, ``.../position`` (H, W, 3) int16 mm in the camera's frame,
+``.../normal`` (H, W, 3) float32; ``pointcloud`` replaces the cameras' images by
+``pointcloud/xyzw`` (N, 4) float32 world points (w 1 where a surface was hit), ``pointcloud/rgb``
+(N, 3) uint8 and ``pointcloud/segmentation`` (N, 1) int16, N the cameras' pixels; ``sensor_data``
+gives the renderer's raw ``Color`` and ``PositionSegmentation``; ``sensor_param/<camera>`` carries
+each camera's ``intrinsic_cv``, ``extrinsic_cv`` and ``cam2world_gl``; a "+state" mode replaces
+``agent`` and ``extra`` by the flat ``state``.
+
 (``state`` is the same proprioception flattened into one vector, :data:`STATE_LAYOUT`; camera sizes follow the env's
 ``sensor_configs``: :func:`camera_sensor_configs` renders both cameras at another size, e.g. the
 84x84 a CPU policy takes, instead of rendering 224x224 and shrinking.) The instruction is ``env.unwrapped.instruction``, never an observation.
