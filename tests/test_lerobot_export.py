@@ -18,7 +18,7 @@ import pytest
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.demos import main
 from mani_skill_softvt.demos import render_observations
-from mani_skill_softvt.data.lerobot import (STATE_PARTS, Source, export_lerobot, marker_sources,
+from mani_skill_softvt.data.lerobot import (STATE_PARTS, Source, depth_sources, export_lerobot, marker_sources,
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR
 
@@ -245,8 +245,10 @@ def test_no_video_export_via_cli_splits_files(rendered, tmp_path, capsys):
 
 # --------------------------------------------------------------------- refusals (synthetic files)
 
-def _fake_pair(root: Path, t: int = 4, drop: str | None = None, obs_frames: int | None = None) -> Source:
-    """A trajectory file (no evaluator, no env states: the export must not need them) and a rendering."""
+def _fake_pair(root: Path, t: int = 4, drop: str | None = None, obs_frames: int | None = None,
+               depth: bool = False) -> Source:
+    """A trajectory file (no evaluator, no env states: the export must not need them) and a rendering
+    (``depth``: an rgbd one, each camera's int16 millimetre depth beside its image)."""
     root.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
     with h5py.File(root / "task0.h5", "w") as f:
@@ -258,13 +260,14 @@ def _fake_pair(root: Path, t: int = 4, drop: str | None = None, obs_frames: int 
         g.attrs.update({"instruction": "Pick up the cube.", "seed": 1})
     n = t + 1 if obs_frames is None else obs_frames
     shapes = {"agent/qpos": (9,), "agent/qvel": (9,), "extra/tcp_pose": (7,), "extra/gripper_width": (1,),
-              **{k: (3, 2) for k in marker_sources().values()}, **{k: (8, 8, 3) for k in video_sources().values()}}
+              **{k: (3, 2) for k in marker_sources().values()}, **{k: (8, 8, 3) for k in video_sources().values()},
+              **({k: (16, 16, 1) for k in depth_sources().values()} if depth else {})}
     with h5py.File(root / "task0_rgb_tactile.h5", "w") as f:
         g = f.create_group("traj_0")
         g.attrs["instruction"] = "Pick up the cube."
         for k, shape in shapes.items():
             if k != drop:
-                dtype = np.uint8 if len(shape) == 3 else np.float32
+                dtype = np.int16 if k.endswith("depth") else np.uint8 if len(shape) == 3 else np.float32
                 g[f"obs/{k}"] = (rng.random((n, *shape)) * 200).astype(dtype)
     return Source(root / "task0.h5", root / "task0_rgb_tactile.h5")
 
@@ -272,6 +275,29 @@ def _fake_pair(root: Path, t: int = 4, drop: str | None = None, obs_frames: int 
 def test_synthetic_roundtrip_without_evaluator_data(tmp_path):
     info = export_lerobot([_fake_pair(tmp_path / "src")], tmp_path / "out")
     assert info["total_frames"] == 4 and info["features"]["observation.images.base_camera"]["shape"] == [8, 8, 3]
+
+
+def test_camera_depth_is_exported_in_metres_per_pixel_and_resized_by_nearest_neighbour(tmp_path):
+    src = _fake_pair(tmp_path / "src", depth=True)
+    info = export_lerobot([src], tmp_path / "out", use_videos=False)
+    table = pq.read_table(tmp_path / "out/data/chunk-000/file-000.parquet")
+    stats = json.loads((tmp_path / "out/meta/stats.json").read_text())
+    with h5py.File(src.rendered_h5, "r") as f:
+        for feat, key in depth_sources().items():
+            assert info["features"][feat]["shape"] == [16, 16, 1] and info["features"][feat]["dtype"] == "float32"
+            got = np.array(table.column(feat).to_pylist(), np.float32)
+            mm = f[f"traj_0/obs/{key}"][:4]
+            np.testing.assert_array_equal(got, mm.astype(np.float32) / 1000)  # exact: mm are integers
+            assert np.array(stats[feat]["max"]).shape == (16, 16, 1)  # per pixel, as LeRobot computes them
+            np.testing.assert_allclose(stats[feat]["max"], mm.max(0) / 1000, rtol=1e-6)
+    half = export_lerobot([src], tmp_path / "half", use_videos=False, image_size=(8, 8))
+    table = pq.read_table(tmp_path / "half/data/chunk-000/file-000.parquet")
+    feat, key = next(iter(depth_sources().items()))
+    assert half["features"][feat]["shape"] == [8, 8, 1]
+    got = np.array(table.column(feat).to_pylist(), np.float32)
+    with h5py.File(src.rendered_h5, "r") as f:
+        source = set(f[f"traj_0/obs/{key}"][:4].ravel().tolist())
+    assert set(np.rint(got.ravel() * 1000).astype(int).tolist()) <= source  # every depth exported was rendered
 
 
 def test_refuses_missing_observations(tmp_path):

@@ -12,7 +12,8 @@ of ``render_observations``; :class:`~mani_skill_softvt.data.demo_set.DemoSet` fi
     videos/<video_key>/chunk-000/file-000.mp4       episodes concatenated, h264 yuv420p
 
 Only a whitelist of policy observations is exported (proprioception, camera and tactile images,
-tactile marker fields); the ``evaluator/`` group (FEM nodes, D_t, R_t, ...) and the env states
+tactile marker fields, and each camera's depth where the demos were rendered in an rgbd mode:
+``observation.depth.<camera>``, float32 metres (H, W, 1), 0 where nothing was hit); the ``evaluator/`` group (FEM nodes, D_t, R_t, ...) and the env states
 are never read, so no privileged quantity can leak into a training set.
 """
 
@@ -22,6 +23,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import h5py
 import imageio.v2 as imageio
 import numpy as np
@@ -37,6 +39,7 @@ from ..observations import (
     QPOS,
     QVEL,
     SIDES,
+    ObsMode,
     TCP_POSE,
     camera_key,
     tactile_key,
@@ -92,6 +95,24 @@ def marker_sources() -> dict[str, str]:
     return {f"observation.tactile.{s}.{m}": tactile_key(s, m) for s in SIDES for m in MARKER_FIELDS}
 
 
+def depth_sources() -> dict[str, str]:
+    """LeRobot depth feature -> rendered key: each camera's depth, in files rendered in an rgbd mode.
+    LeRobot has no depth type: exported as numbers, not video (h264 would lose the millimetres)."""
+    return {f"observation.depth.{c}": camera_key(c, "depth") for c in CAMERAS}
+
+
+def depth_metres(depth_mm: np.ndarray, image_size: tuple[int, int] | None = None) -> np.ndarray:
+    """ManiSkill's int16 millimetre depth ((..., H, W, 1), 0: nothing hit) as float32 metres, resized
+    to ``image_size`` by nearest neighbour: averaging would invent depths between an edge's two sides."""
+    d = np.asarray(depth_mm)
+    if image_size is not None and d.shape[-3:-1] != tuple(image_size):
+        h, w = image_size
+        frames = d.reshape(-1, *d.shape[-3:-1])
+        d = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_NEAREST) for f in frames])
+        d = d.reshape(*depth_mm.shape[:-3], h, w, 1)
+    return (d.astype(np.float32) / 1000.0).astype(np.float32)
+
+
 def frame_features(flat: dict[str, np.ndarray], image_size: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
     """One live observation (flattened, :func:`~mani_skill_softvt.observations.flatten_batch`) under
     the export's feature names: ``observation.state``, ``observation.images.<camera>`` and
@@ -107,10 +128,12 @@ def frame_features(flat: dict[str, np.ndarray], image_size: tuple[int, int] | No
             out[feat] = image if image_size is None else resize_image(image, image_size)
     out.update({feat: np.asarray(flat[key]).reshape(-1).astype(np.float32)
                 for feat, key in marker_sources().items() if key in flat})
+    out.update({feat: depth_metres(flat[key], image_size) for feat, key in depth_sources().items() if key in flat})
     return out
 
 
-FEATURE_OBS_MODES = ("state_dict", "rgb", "rgb+tactile")  # the obs modes whose frames have these features
+# The obs modes whose frames have these features (the state, camera images, camera depth, touch).
+FEATURE_OBS_MODES = ("state_dict", "rgb", "rgb+tactile", "rgbd", "rgbd+tactile")
 
 
 def frame_feature_shapes(obs_mode: str, camera_size: tuple[int, int] | None = None,
@@ -122,10 +145,13 @@ def frame_feature_shapes(obs_mode: str, camera_size: tuple[int, int] | None = No
         raise ValueError(f"obs mode {obs_mode!r} has no per-stream features; choose one of {FEATURE_OBS_MODES}")
     dof = len(PandaSoftVT.arm_joint_names) + len(PandaSoftVT.gripper_joint_names)
     shapes = {"observation.state": (2 * dof + len(TCP_POSE_NAMES) + 1,)}  # qpos, qvel, tcp pose, jaw gap
-    if obs_mode.startswith("rgb"):
-        h, w = image_size or camera_size or NATIVE_CAMERA_SIZE
+    mode = ObsMode.parse(obs_mode)
+    h, w = image_size or camera_size or NATIVE_CAMERA_SIZE
+    if "rgb" in mode.textures:
         shapes.update({f"observation.images.{c}": (int(h), int(w), 3) for c in CAMERAS})
-    if obs_mode == "rgb+tactile":
+    if "depth" in mode.textures:
+        shapes.update({feat: (int(h), int(w), 1) for feat in depth_sources()})
+    if mode.tactile:
         h, w = image_size or (IMAGE_HEIGHT, IMAGE_WIDTH)
         shapes.update({f"observation.images.tactile_{s}": (int(h), int(w), 3) for s in SIDES})
         shapes.update({feat: (2 * MARKER_ROWS * MARKER_COLS,) for feat in marker_sources()})
@@ -198,8 +224,8 @@ def state_names(dims: dict[str, int]) -> list[str]:
 
 
 def episode_columns(src: h5py.Group, obs: h5py.Group, t: int, episode_index: int, task_index: int,
-                    start_index: int, fps: int) -> dict[str, np.ndarray]:
-    """The non-image columns of one episode, T rows.
+                    start_index: int, fps: int, image_size: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
+    """The non-video columns of one episode, T rows (camera depth resized to ``image_size``).
 
     Frame t pairs the observation *before* action t with action t (LeRobot's convention), so the
     last rendered observation (after the final action) has no row.
@@ -212,6 +238,9 @@ def episode_columns(src: h5py.Group, obs: h5py.Group, t: int, episode_index: int
     }
     for feat, key in marker_sources().items():
         cols[feat] = obs[key][:t].reshape(t, -1).astype(np.float32)
+    for feat, key in depth_sources().items():
+        if key in obs:  # rendered in an rgbd mode
+            cols[feat] = depth_metres(obs[key][:t], image_size)
     done = np.zeros(t, bool)
     done[-1] = True  # the stored episode ends at its last action (terminated, truncated or expert done)
     cols["next.done"] = done
@@ -233,6 +262,10 @@ def numeric_features(cols: dict[str, np.ndarray], names_state: list[str]) -> dic
     for feat in marker_sources():
         n = cols[feat].shape[1] // 2
         feats[feat] = {"dtype": "float32", "shape": [2 * n], "names": [f"m{i}_{a}" for i in range(n) for a in "uv"]}
+    for feat in depth_sources():
+        if feat in cols:
+            feats[feat] = {"dtype": "float32", "shape": list(cols[feat].shape[1:]), "names": ["height", "width", "channels"],
+                           "info": {"unit": "m", "missing": 0.0, "source": "ManiSkill depth, int16 mm along the optical axis"}}
     feats["next.done"] = {"dtype": "bool", "shape": [1], "names": None}
     return {**feats, **INDEX_FEATURES}
 
@@ -245,12 +278,16 @@ def video_feature(height: int, width: int, fps: int) -> dict:
 
 # ------------------------------------------------------------------------------------- stats
 
-def feature_stats(x: np.ndarray) -> dict[str, np.ndarray]:
-    """LeRobot's per-feature statistics over the frame axis (plus quantiles, used by pi0.5 / openpi)."""
+def feature_stats(x: np.ndarray, shape=None) -> dict[str, np.ndarray]:
+    """LeRobot's per-feature statistics over the frame axis (plus quantiles, used by pi0.5 / openpi),
+    one per element, in the feature's ``shape`` where it has several axes (a depth map's per pixel)."""
     x = np.asarray(x, np.float64).reshape(len(x), -1)
-    out = {"min": x.min(0), "max": x.max(0), "mean": x.mean(0), "std": x.std(0), "count": np.array([len(x)])}
+    out = {"min": x.min(0), "max": x.max(0), "mean": x.mean(0), "std": x.std(0)}
     for q in QUANTILES:
         out[f"q{round(q * 100):02d}"] = np.quantile(x, q, axis=0)
+    if shape is not None and len(shape) > 1:
+        out = {k: v.reshape(shape) for k, v in out.items()}
+    out["count"] = np.array([len(x)])
     return out
 
 
@@ -299,7 +336,10 @@ def _arrow_table(cols: dict[str, np.ndarray], features: dict[str, dict]):
         if ft["shape"] == [1]:
             arrays.append(pa.array(x.reshape(-1)))
         else:
-            arrays.append(pa.FixedSizeListArray.from_arrays(pa.array(x.reshape(-1)), ft["shape"][0]))
+            nested = pa.array(x.reshape(-1))
+            for size in reversed(ft["shape"]):  # (T, H, W, 1): lists of H lists of W lists of 1
+                nested = pa.FixedSizeListArray.from_arrays(nested, size)
+            arrays.append(nested)
         names.append(name)
     return pa.Table.from_arrays(arrays, names=names)
 
@@ -465,7 +505,7 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
     """One episode's columns and stats; ``features`` are taken from the first episode, then enforced."""
     with open_h5(ep["source"].trajectory_h5) as src, open_h5(ep["source"].rendered_h5) as ren:
         obs, t = ren[ep["traj"]]["obs"], ep["length"]
-        cols = episode_columns(src[ep["traj"]], obs, t, ep_index, task_index, start, fps)
+        cols = episode_columns(src[ep["traj"]], obs, t, ep_index, task_index, start, fps, image_size)
         if features is None:
             features = numeric_features(cols, state_names({k: int(np.prod(obs[k].shape[1:])) for k, _ in STATE_PARTS}))
             if use_videos:
@@ -473,7 +513,7 @@ def _read_episode(ep: dict, ep_index: int, task_index: int, start: int, fps: int
                     h, w = image_size or (int(obs[key].shape[1]), int(obs[key].shape[2]))
                     features[vk] = video_feature(h, w, fps)
         check_shapes(f"{ep['source'].rendered_h5}:{ep['traj']}", cols, obs, features, use_videos and image_size is None)
-        stats = {f: feature_stats(cols[f]) for f in features if features[f]["dtype"] != "video"}
+        stats = {f: feature_stats(cols[f], features[f]["shape"]) for f in features if features[f]["dtype"] != "video"}
         if use_videos:
             stats.update({vk: image_stats(obs[key], t) for vk, key in video_sources().items()})
     return cols, stats, features
@@ -513,4 +553,4 @@ def _write_episodes_meta(out_dir: Path, rows: list[dict], stats: list[dict]) -> 
 
 
 __all__ = ["Source", "export_lerobot", "feature_stats", "image_stats", "aggregate_stats",
-           "tasks_table", "video_sources", "marker_sources"]
+           "tasks_table", "video_sources", "marker_sources", "depth_sources"]
