@@ -56,7 +56,7 @@ from .evaluation.wrapper import make_env
 from .expert.pick_place import DEFAULT_PLANNER
 from .expert.solution import SOURCE_DESC, solve
 from .fileio import append_jsonl, atomic_write, atomic_write_json, read_json
-from .observations import camera_sensor_configs, camera_size_name, flatten_batch, parse_image_size, tactile_keys
+from .observations import ObsMode, camera_sensor_configs, camera_size_name, flatten_batch, parse_image_size, tactile_keys
 from .parallel import run_tasks
 from .paths import DEMOS_DIR, writable_default
 from .numerics import chosen as chosen_numerics
@@ -528,7 +528,9 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="re-render stored demos into observations (e.g. rgb+tactile)")
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
-    r.add_argument("--obs-mode", default="rgb+tactile")
+    r.add_argument("--obs-mode", default="rgb+tactile",
+                   help="any camera mode of the env (mani_skill_softvt.observations), e.g. rgb+tactile, rgbd+tactile "
+                        "(camera depth, which export-lerobot carries as observation.depth.<camera>), pointcloud")
     r.add_argument("--camera-size", default="native", metavar="HxW",
                    help="render both cameras at HxW (e.g. 84x84, the cpu baselines' input) instead of 224x224")
     r.add_argument("--workers", type=int, default=1, help="tasks rendered in parallel processes")
@@ -589,6 +591,9 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
     try:
         camera_size = parse_image_size(args.camera_size, "--camera-size")
         camera_sensor_configs(camera_size)
+        if not ObsMode.parse(args.obs_mode).images:
+            raise ValueError(f"--obs-mode {args.obs_mode}: a rendering is of camera images; give a camera mode "
+                             "(rgb+tactile, rgbd+tactile, pointcloud...)")
     except ValueError as err:
         ap.error(str(err))
     demo_set = DemoSet(args.out, args.suite)

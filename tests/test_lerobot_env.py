@@ -112,3 +112,20 @@ def test_an_episode_through_lerobots_loop_scores_as_the_evaluators(tmp_path):
 
     assert strip(theirs) == strip(ours)
     assert ours["steps"] == len(actions) and max(ours["deformation_trace"]) > 0.0
+
+
+def test_rgbd_observations_carry_each_cameras_depth_in_metres_as_the_export_does():
+    """An rgbd+tactile env gives LeRobot ``depth.<camera>`` beside the images (observation.depth.<camera>
+    once LeRobot adds its prefix: the export's name), float32 metres, nearest-neighbour resized."""
+    shapes = frame_feature_shapes("rgbd+tactile", (84, 84), (64, 64))
+    assert shapes["observation.depth.base_camera"] == (64, 64, 1)
+    env = LeRobotEnv("object_rigid", 3, obs_mode="rgbd+tactile", camera_size=(84, 84), image_size=(64, 64))
+    obs, _ = env.reset(seed=0)
+    assert set(obs) == POLICY_KEYS | {"depth.base_camera", "depth.hand_camera"}
+    assert env.observation_space.contains(obs)
+    depth = obs["depth.base_camera"]
+    assert depth.dtype == np.float32 and np.allclose(depth * 1000, np.round(depth * 1000), atol=1e-3)  # whole mm
+    # The third-person camera looks down on the table from about half a metre: depths of that order.
+    seen = depth[depth > 0]
+    assert seen.size > 0.5 * depth.size and 0.2 < np.median(seen) < 1.5, (seen.size / depth.size, np.median(seen))
+    env.close()

@@ -103,7 +103,9 @@ class SoftVTEnvConfig(EnvConfig):
 
     ``protocol``: ``id`` (the held-out initial states) or ``ood`` (each of ``conditions``, default
     all nine, from the same states); ``--seed=0`` starts at the protocol's first episode.
-    ``obs_type``: ``state_dict``, ``rgb`` or ``rgb+tactile``; ``camera_size``: ``HxW`` the cameras
+    ``obs_type``: ``state_dict``, ``rgb``, ``rgb+tactile``, ``rgbd`` or ``rgbd+tactile`` (the export's feature
+    modes, :data:`mani_skill_softvt.data.lerobot.FEATURE_OBS_MODES`; rgbd adds ``observation.depth.<camera>``,
+    float32 metres); ``camera_size``: ``HxW`` the cameras
     render at (the demos' ``render --camera-size``, e.g. ``84x84``) or ``native`` (224x224);
     ``image_size``: what every image stream is resized to, as the export's ``--image-size`` did
     (default 224x224, the export's; ``native`` keeps each stream's size). ``records_dir``: where the
