@@ -94,13 +94,16 @@ def test_motionplanning_runner_records_maniskill_trajectories_with_the_evaluator
         assert g.attrs["instruction"] == ep["instruction"] and int(g.attrs["seed"]) == ep["episode_seed"]
 
 
-def test_maniskill_replay_restores_the_recorded_states_and_renders_touch(mp_demo, tmp_path):
+# Point clouds with touch by default; the image modes (the same replay, other textures) with -m slow.
+@pytest.mark.parametrize("obs_mode", ["pointcloud+tactile", pytest.param("rgb+tactile", marks=pytest.mark.slow),
+                                      pytest.param("rgbd+tactile", marks=pytest.mark.slow)])
+def test_maniskill_replay_restores_the_recorded_states_and_renders_touch(mp_demo, tmp_path, obs_mode):
     # ManiSkill's module itself: the module-qualified env id makes gym import the package.
     src = _copy(mp_demo, tmp_path)
     out = _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), "--use-env-states",
-               "-o", "rgb+tactile", "--save-traj")
+               "-o", obs_mode, "--save-traj")
     assert "1/1" in out
-    dst = tmp_path / f"{src.stem}.rgb+tactile.pd_joint_pos.physx_cpu.h5"
+    dst = tmp_path / f"{src.stem}.{obs_mode}.pd_joint_pos.physx_cpu.h5"
     meta = json.loads(dst.with_suffix(".json").read_text())
     assert meta["episodes"][0]["success"]
     with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
@@ -114,7 +117,15 @@ def test_maniskill_replay_restores_the_recorded_states_and_renders_touch(mp_demo
         for side in ("left", "right"):
             assert obs[f"tactile/{side}/rgb"].shape == (t + 1, 240, 320, 3)
             assert obs[f"tactile/{side}/marker_current"].shape == (t + 1, 99, 2)
-        assert obs["sensor_data/base_camera/rgb"].shape[0] == t + 1
+        if obs_mode.startswith("pointcloud"):  # both cameras' pixels as world points, with colour and ids
+            n = 2 * 224 * 224
+            assert obs["pointcloud/xyzw"].shape == (t + 1, n, 4) and obs["pointcloud/segmentation"].shape == (t + 1, n, 1)
+            assert obs["pointcloud/rgb"].dtype == np.uint8 and "sensor_data/base_camera/rgb" not in obs
+        else:
+            assert obs["sensor_data/base_camera/rgb"].shape[0] == t + 1
+        if obs_mode.startswith("rgbd"):
+            assert obs["sensor_data/hand_camera/depth"].shape == (t + 1, 224, 224, 1)
+            assert obs["sensor_data/hand_camera/depth"].dtype == np.int16
 
 
 def test_replay_from_the_first_state_reproduces_the_episode(mp_demo, tmp_path):
