@@ -29,7 +29,7 @@ from mani_skill_softvt.paths import REPO_DIR  # noqa: E402
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 BIN = Path(sys.executable).parent
-ALLOWED = ("observation.images.", "observation.state", "observation.tactile.")  # the export's feature names
+ALLOWED = ("observation.images.", "observation.state", "observation.tactile.", "observation.depth.")  # the export's names
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -45,6 +45,31 @@ def test_the_plugin_declares_the_exports_features():
     expected = {k: (s[2], s[0], s[1]) if k.startswith("observation.images.") else s for k, s in shapes.items()}
     assert {k: tuple(f.shape) for k, f in features.items() if k != "action"} == expected
     assert tuple(features["action"].shape) == (7,)
+
+
+def test_an_rgbd_export_loads_in_lerobot_with_depth_in_metres_and_the_plugin_declares_it(tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    sys.path.insert(0, str(REPO_DIR / "tests"))
+    from test_lerobot_export import _fake_pair  # a small synthetic rendering, camera depth included
+
+    from mani_skill_softvt.data.lerobot import depth_sources, export_lerobot
+
+    src = _fake_pair(tmp_path / "src", t=6, depth=True)
+    export_lerobot([src], tmp_path / "ds", use_videos=False)
+    ds = LeRobotDataset("local/softvt-depth", root=tmp_path / "ds")
+    import h5py
+
+    with h5py.File(src.rendered_h5, "r") as f:
+        for feat, key in depth_sources().items():
+            got = ds[2][feat].numpy()
+            assert got.shape == (16, 16, 1)
+            np.testing.assert_array_equal(got, f[f"traj_0/obs/{key}"][2].astype(np.float32) / 1000)
+            assert ds.meta.stats[feat]["mean"].shape == (16, 16, 1)
+    cfg = make_env_config("softvt", task="SoftVTObjectRigid-v1", task_ids=[3], obs_type="rgbd+tactile",
+                          camera_size="84x84", image_size="64x64")
+    features = env_to_policy_features(cfg)
+    assert tuple(features["observation.depth.base_camera"].shape) == (64, 64, 1)
 
 
 @pytest.mark.parametrize("kwargs, message", [
