@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from .data.demo_set import DemoSet, latest_verdicts
-from .data.lerobot import export_lerobot
+from .integrations.lerobot.export import export_lerobot
 from .data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
 from .data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
 from .data.trajectory import (

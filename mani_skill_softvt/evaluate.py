@@ -100,7 +100,7 @@ def main(argv=None) -> dict:
         ap.error(str(e))
     if args.workers < 1:
         ap.error("--workers must be >= 1")
-    if args.video and run.obs_mode in ("state", "none") and args.policy != "expert":
+    if args.video and run.obs_mode not in ("state_dict", "rgb", "rgb+tactile") and args.policy != "expert":
         ap.error(f"--video re-runs episodes with dict observations (rgb+tactile), which a policy evaluated in "
                  f"obs mode '{run.obs_mode}' does not read; evaluate with state_dict, rgb or rgb+tactile")
     if run.policy.kind == "class":

@@ -4,9 +4,9 @@ tests, tests/test_lerobot_plugin.py, run on the LeRobot stack)."""
 import numpy as np
 import pytest
 
-from mani_skill_softvt.data.lerobot import frame_feature_shapes
+from mani_skill_softvt.integrations.lerobot.export import frame_feature_shapes
 from mani_skill_softvt.data.seeds import id_seed
-from mani_skill_softvt.evaluation.lerobot_env import LeRobotEnv, lerobot_observation, suite_of_env_id
+from mani_skill_softvt.integrations.lerobot.env import LeRobotEnv, lerobot_observation, suite_of_env_id
 from mani_skill_softvt.evaluation.records import read_records, record_hash
 from mani_skill_softvt.paths import REPO_DIR
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, task_spec

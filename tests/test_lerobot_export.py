@@ -18,7 +18,7 @@ import pytest
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.demos import main
 from mani_skill_softvt.demos import render_observations
-from mani_skill_softvt.data.lerobot import (STATE_PARTS, Source, depth_sources, export_lerobot, marker_sources,
+from mani_skill_softvt.integrations.lerobot.export import (STATE_PARTS, Source, depth_sources, export_lerobot, marker_sources,
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR
 
@@ -331,7 +331,7 @@ def test_live_frames_carry_the_exports_names_shapes_and_values(exported):
     # A policy trained on the export reads the live env (lerobot-eval's plugin) through
     # frame_features: the same feature names and shapes as info.json, and on the rendered frame
     # the same state and marker values as the exported row.
-    from mani_skill_softvt.data.lerobot import frame_feature_shapes, frame_features
+    from mani_skill_softvt.integrations.lerobot.export import frame_feature_shapes, frame_features
 
     out, info, src = exported
     exported_shapes = {k: tuple(f["shape"]) for k, f in info["features"].items() if k.startswith("observation.")}

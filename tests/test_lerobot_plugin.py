@@ -23,7 +23,7 @@ from lerobot.envs.factory import make_env_config  # noqa: E402
 from lerobot.envs.utils import env_to_policy_features  # noqa: E402
 from lerobot.utils.import_utils import register_third_party_plugins  # noqa: E402
 
-from mani_skill_softvt.data.lerobot import frame_feature_shapes  # noqa: E402
+from mani_skill_softvt.integrations.lerobot.export import frame_feature_shapes  # noqa: E402
 from mani_skill_softvt.evaluation.records import read_records  # noqa: E402
 from mani_skill_softvt.paths import REPO_DIR  # noqa: E402
 
@@ -53,7 +53,7 @@ def test_an_rgbd_export_loads_in_lerobot_with_depth_in_metres_and_the_plugin_dec
     sys.path.insert(0, str(REPO_DIR / "tests"))
     from test_lerobot_export import _fake_pair  # a small synthetic rendering, camera depth included
 
-    from mani_skill_softvt.data.lerobot import depth_sources, export_lerobot
+    from mani_skill_softvt.integrations.lerobot.export import depth_sources, export_lerobot
 
     src = _fake_pair(tmp_path / "src", t=6, depth=True)
     export_lerobot([src], tmp_path / "ds", use_videos=False)

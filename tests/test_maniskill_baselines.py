@@ -265,7 +265,7 @@ def test_a_maniskill_checkpoint_is_called_as_the_baselines_eval_calls_it(tmp_pat
     consecutive steps (the first frame repeated at the reset), the EMA weights loaded; no ManiSkill script needed."""
     import torch
 
-    from mani_skill_softvt.evaluation.maniskill_dp import ManiSkillDiffusionPolicy
+    from mani_skill_softvt.integrations.maniskill.diffusion_policy import ManiSkillDiffusionPolicy
 
     (tmp_path / "train_rgbd.py").write_text(FAKE_SCRIPT)
     torch.save({"agent": {}, "ema_agent": {"calls": torch.tensor(10.0)}}, tmp_path / "7.pt")

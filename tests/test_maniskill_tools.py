@@ -45,7 +45,7 @@ def _run(module: str, *args: str, ok: bool = True) -> subprocess.CompletedProces
 def mp_demo(tmp_path_factory) -> Path:
     """One rigid-suite expert trajectory from the package's motion-planning runner (pd_joint_pos)."""
     from mani_skill_softvt.expert.planner import MPLIB_PLANS, MPLIB_UNAVAILABLE
-    from mani_skill_softvt.motionplanning import main
+    from mani_skill_softvt.integrations.maniskill.motionplanning import main
 
     if not MPLIB_PLANS:
         pytest.skip(MPLIB_UNAVAILABLE)
@@ -260,7 +260,7 @@ def test_the_committed_soft_sample_replays_to_success_on_any_machine(soft_demo, 
 @pytest.mark.slow
 def test_soft_joint_space_demo_converts_into_the_papers_action_space(tmp_path):
     from mani_skill_softvt.expert.planner import MPLIB_PLANS, MPLIB_UNAVAILABLE
-    from mani_skill_softvt.motionplanning import main
+    from mani_skill_softvt.integrations.maniskill.motionplanning import main
 
     if not MPLIB_PLANS:
         pytest.skip(MPLIB_UNAVAILABLE)
@@ -305,7 +305,7 @@ def _fake_trajectory(path: Path, env_id: str, control_mode: str = "pd_joint_pos"
 
 
 def test_replay_refuses_bad_input_naming_the_file_and_what_to_do(tmp_path):
-    from mani_skill_softvt.replay import main as replay_main
+    from mani_skill_softvt.integrations.maniskill.replay import main as replay_main
 
     current = {"gripper_action_version": GRIPPER_ACTION_VERSION}
     missing = tmp_path / "missing.h5"
@@ -332,8 +332,8 @@ def test_replay_refuses_bad_input_naming_the_file_and_what_to_do(tmp_path):
 
 def test_an_old_joint_mode_file_is_refused_then_upgraded_in_place(mp_demo, tmp_path, capsys):
     from mani_skill_softvt.data.trajectory import gripper_action_problem, trajectory_json
-    from mani_skill_softvt.replay import check_input
-    from mani_skill_softvt.replay import main as replay_main
+    from mani_skill_softvt.integrations.maniskill.replay import check_input
+    from mani_skill_softvt.integrations.maniskill.replay import main as replay_main
 
     # The same demo as written before the gripper was ManiSkill's: closures in [0, 1], no version, the suite's id.
     old = _copy(mp_demo, tmp_path)
@@ -364,7 +364,7 @@ def test_an_old_joint_mode_file_is_refused_then_upgraded_in_place(mp_demo, tmp_p
 
 
 def test_motionplanning_refuses_bad_input_before_it_plans(tmp_path, capsys):
-    from mani_skill_softvt.motionplanning import main
+    from mani_skill_softvt.integrations.maniskill.motionplanning import main
 
     (tmp_path / RIGID_TASK / "motionplanning").mkdir(parents=True)
     (tmp_path / RIGID_TASK / "motionplanning" / "task3.h5").write_bytes(b"")
@@ -388,7 +388,7 @@ def test_a_maniskill_checkpoint_sees_what_the_baselines_eval_env_shows_it(obs_mo
     # does (FlattenRGBDObservationWrapper in rgb, the flat state in state).
     from mani_skill.utils.wrappers.flatten import FlattenRGBDObservationWrapper
 
-    from mani_skill_softvt.evaluation.maniskill_dp import flatten_observation
+    from mani_skill_softvt.integrations.maniskill.diffusion_policy import flatten_observation
 
     raw = gym.make(RIGID_TASK, obs_mode=obs_mode, control_mode="pd_ee_delta_pose")
     ours = flatten_observation(raw.reset(seed=0)[0])

@@ -19,9 +19,9 @@ pytest.importorskip("openpi_client", reason="ws:// policies need the remote extr
 
 import mani_skill_softvt  # noqa: E402,F401  (registers the envs)
 from mani_skill_softvt.evaluation.policies import HoldPolicy, RandomPolicy, _tcp_action, load_policy
-from mani_skill_softvt.evaluation.remote import RemotePolicyError, WebsocketPolicy, to_openpi_observation
+from mani_skill_softvt.integrations.openpi.remote import RemotePolicyError, WebsocketPolicy, to_openpi_observation
 from mani_skill_softvt.physics.transforms import quat_to_rotvec
-from mani_skill_softvt.serve import build_server, main, make_policy_factory
+from mani_skill_softvt.integrations.openpi.serve import build_server, main, make_policy_factory
 from mani_skill_softvt.tasks import constants as C
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -309,7 +309,7 @@ def test_a_server_whose_policy_takes_smaller_cameras_says_so_and_a_mismatch_is_a
 def test_camera_depth_travels_beside_its_image_and_back():
     """rgbd modes: each camera's int16 millimetre depth goes as ``<image key>_depth``, and a project
     policy served by serve.py reads it back under the env's key, bit for bit."""
-    from mani_skill_softvt.serve import from_openpi_observation
+    from mani_skill_softvt.integrations.openpi.serve import from_openpi_observation
 
     obs = _obs(tactile=True)
     rng = np.random.default_rng(1)

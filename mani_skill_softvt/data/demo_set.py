@@ -28,13 +28,21 @@ from pathlib import Path
 from ..fileio import file_lock, read_jsonl
 from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs, camera_size_name
 from ..tasks.suites import NUM_TASKS, get_suite
-from .lerobot import Source
 
 
 def latest_verdicts(qc_log: list[dict]) -> list[dict]:
     """One screening record per seed, its latest (an episode recorded again on another machine
     appends a second line), in the order the seeds were first logged."""
     return list({r["seed"]: r for r in qc_log}.values())
+
+
+@dataclass(frozen=True)
+class Source:
+    """One task's trajectory file and its rendered observations: what training and the LeRobot
+    export read (:meth:`DemoSet.rendered_sources`)."""
+
+    trajectory_h5: Path
+    rendered_h5: Path
 
 
 @dataclass(frozen=True)

@@ -12,10 +12,10 @@ process that starts a run: its kind, the SHA-256 of its file, and what it needs 
 obs and control modes it was trained for, its camera size), read from one read of the file. The
 source is what workers get; :meth:`PolicySource.load` builds the policy from it.
 
-Kinds other than these three register themselves as entry points of the group
-``mani_skill_softvt.policy_kinds`` (a :class:`PolicyKind`): the baselines register their policy
-files there (``pyproject.toml``), so the evaluation never imports the baselines, and any package
-can add its own kind the same way.
+Kinds other than the built-in names and ``module:Class`` register themselves as entry points of the
+group ``mani_skill_softvt.policy_kinds`` (a :class:`PolicyKind`): the baselines register their policy
+files there, openpi's integration its ``ws://`` servers (``pyproject.toml``), so the evaluation
+imports neither, and any package can add its own kind the same way.
 """
 
 from __future__ import annotations
@@ -33,8 +33,6 @@ from ..policy import Policy  # noqa: F401  (the contract; re-exported for user c
 from ..tasks.robot import base_frame_pose
 
 POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
-REMOTE_PREFIXES = ("ws://", "wss://")
-IMAGE_OBS_MODES = ("rgb", "rgb+tactile", "rgbd", "rgbd+tactile")  # what a policy server is sent (remote.py)
 
 
 @dataclass(frozen=True)
@@ -70,27 +68,6 @@ class PolicyKind:
 
     def load(self, source: PolicySource) -> Policy:
         raise NotImplementedError
-
-
-class _RemoteKind(PolicyKind):
-    name = "remote"
-
-    def matches(self, spec):
-        return spec.startswith(REMOTE_PREFIXES)
-
-    def resolve(self, spec):
-        return PolicySource(spec, self.name, obs_modes=IMAGE_OBS_MODES)  # a server is sent camera images
-
-    def load(self, source):
-        try:
-            from .remote import remote_policy_from_spec
-        except ModuleNotFoundError as e:
-            if e.name != "openpi_client":
-                raise
-            raise ValueError(f"--policy {source.spec} needs openpi's websocket client: pip install "
-                             "'mani-skill-softvt[remote]' (openpi-client 0.1.2 needs NumPy < 2, so it is on the default "
-                             "stack, scripts/setup.sh, not the LeRobot one)") from None
-        return remote_policy_from_spec(source.spec)
 
 
 class _BuiltinKind(PolicyKind):
@@ -134,7 +111,7 @@ class _ClassKind(PolicyKind):
         return policy
 
 
-_OWN_KINDS = (_RemoteKind(), _BuiltinKind())  # tried first: naming them loads no other package
+_OWN_KINDS = (_BuiltinKind(),)  # tried first: naming them loads no other package
 _CLASS_KIND = _ClassKind()  # tried last: any "a:b" would match it
 
 
@@ -166,8 +143,8 @@ def policy_kind(name: str) -> PolicyKind:
 
 
 def resolve_policy(spec: str) -> PolicySource:
-    """The :class:`PolicySource` of ``spec``: tried on remote and built-in names, then the
-    registered kinds, then ``module:Class``; ValueError naming the spec for one no kind takes."""
+    """The :class:`PolicySource` of ``spec``: tried on the built-in names, then the registered kinds
+    (``ws://`` servers, policy files), then ``module:Class``; ValueError naming the spec for one no kind takes."""
     spec = str(spec)
     for kind in _OWN_KINDS:
         if kind.matches(spec):

@@ -110,7 +110,7 @@ def episode_record(env, episode: dict, *, termination: str, error: str | None, s
                    policy_sha256: str | None = None, wall_s: float | None = None) -> dict:
     """The sealed record of an episode that just ended on the DSR-wrapped ``env`` (the scoring
     and the receipt read from the env as it ended): :func:`run_episode`'s, and that of any other
-    loop that drives the env itself (LeRobot's, :mod:`~mani_skill_softvt.evaluation.lerobot_env`)."""
+    loop that drives the env itself (LeRobot's, :mod:`~mani_skill_softvt.integrations.lerobot.env`)."""
     u = env.unwrapped
     material = u.object_material(u.target_instance)
     e = material["youngs_modulus"]  # None for a rigid twin

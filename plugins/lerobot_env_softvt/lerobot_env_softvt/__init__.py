@@ -9,7 +9,7 @@ the calibration card, DSR, collapsed tets, how it ended) goes to ``<output_dir>/
 report and R_t plot beside it, where ``python -m mani_skill_softvt.evaluate --rescore`` and the
 report tools read it; evaluations during ``lerobot-train`` (``--env.type=softvt``) leave theirs in
 ``<output_dir>/eval/softvt_<k>/``, one folder per evaluation. The env is
-:class:`mani_skill_softvt.evaluation.lerobot_env.LeRobotEnv`; this module only tells LeRobot how to
+:class:`mani_skill_softvt.integrations.lerobot.env.LeRobotEnv`; this module only tells LeRobot how to
 build it. The envs of a batch step one after another in LeRobot's process (a SyncVectorEnv):
 each is a CPU physics job of its own, and a worker process per (task, condition, batch slot),
 started up front, would cost more than it saves.
@@ -31,9 +31,9 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.envs.utils import freeze_after_episode_end
 from lerobot.utils.constants import ACTION
 
-from mani_skill_softvt.data.lerobot import FPS, frame_feature_shapes
+from mani_skill_softvt.integrations.lerobot.export import FPS, frame_feature_shapes
 from mani_skill_softvt.data.seeds import ID_EPISODES_PER_TASK
-from mani_skill_softvt.evaluation.lerobot_env import LeRobotEnv, records_path, suite_of_env_id
+from mani_skill_softvt.integrations.lerobot.env import LeRobotEnv, records_path, suite_of_env_id
 from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.observations import parse_image_size
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS
@@ -104,7 +104,7 @@ class SoftVTEnvConfig(EnvConfig):
     ``protocol``: ``id`` (the held-out initial states) or ``ood`` (each of ``conditions``, default
     all nine, from the same states); ``--seed=0`` starts at the protocol's first episode.
     ``obs_type``: ``state_dict``, ``rgb``, ``rgb+tactile``, ``rgbd`` or ``rgbd+tactile`` (the export's feature
-    modes, :data:`mani_skill_softvt.data.lerobot.FEATURE_OBS_MODES`; rgbd adds ``observation.depth.<camera>``,
+    modes, :data:`mani_skill_softvt.integrations.lerobot.export.FEATURE_OBS_MODES`; rgbd adds ``observation.depth.<camera>``,
     float32 metres); ``camera_size``: ``HxW`` the cameras
     render at (the demos' ``render --camera-size``, e.g. ``84x84``) or ``native`` (224x224);
     ``image_size``: what every image stream is resized to, as the export's ``--image-size`` did

@@ -8,7 +8,7 @@ task, and nothing of LeRobot is imported here (the plugin, ``lerobot_env_softvt`
 ``EnvConfig`` that builds it):
 
 - **Observations** carry the LeRobot export's feature names
-  (:func:`~mani_skill_softvt.data.lerobot.frame_features`), so a policy trained on the export runs
+  (:func:`~mani_skill_softvt.integrations.lerobot.export.frame_features`), so a policy trained on the export runs
   unchanged: the cameras and GelSight images as ``pixels``, proprioception as ``agent_pos``, the
   marker fields as ``tactile.<side>.<field>``. Nothing evaluator-only is among them.
 - **Seeds name protocol episodes**: ``reset(seed=s)`` starts episode ``s mod 50`` of the task
@@ -34,20 +34,20 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from ..data.lerobot import FPS, frame_feature_shapes, frame_features
-from ..data.seeds import ID_EPISODES_PER_TASK
-from ..fileio import append_jsonl
-from ..observations import flatten_batch, info_bool, unbatch
-from ..physics.fem import SimulationInstabilityError
-from ..rollout import episode_end
-from ..tasks.constants import MAX_EPISODE_STEPS
-from ..tasks.suites import SUITES, task_spec
-from .protocols import episodes
-from .records import read_records
-from .report import plot_traces, write_report
-from .run import records_stem
-from .runner import episode_record
-from .wrapper import make_env
+from .export import FPS, frame_feature_shapes, frame_features
+from ...data.seeds import ID_EPISODES_PER_TASK
+from ...fileio import append_jsonl
+from ...observations import flatten_batch, info_bool, unbatch
+from ...physics.fem import SimulationInstabilityError
+from ...rollout import episode_end
+from ...tasks.constants import MAX_EPISODE_STEPS
+from ...tasks.suites import SUITES, task_spec
+from ...evaluation.protocols import episodes
+from ...evaluation.records import read_records
+from ...evaluation.report import plot_traces, write_report
+from ...evaluation.run import records_stem
+from ...evaluation.runner import episode_record
+from ...evaluation.wrapper import make_env
 
 IMAGE_PREFIX, STATE_FEATURE = "observation.images.", "observation.state"
 

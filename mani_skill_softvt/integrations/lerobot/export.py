@@ -20,7 +20,6 @@ are never read, so no privileged quantity can leak into a training set.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -30,8 +29,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ..fileio import atomic_write, atomic_write_json
-from ..observations import (
+from ...fileio import atomic_write, atomic_write_json
+from ...observations import (
     CAMERAS,
     GRIPPER_WIDTH,
     MARKER_FIELDS,
@@ -44,10 +43,11 @@ from ..observations import (
     camera_key,
     tactile_key,
 )
-from ..tactile.constants import IMAGE_HEIGHT, IMAGE_WIDTH, MARKER_COLS, MARKER_ROWS
-from ..tasks.robot import PandaSoftVT
-from .images import resize_image
-from .trajectory import open_h5
+from ...tactile.constants import IMAGE_HEIGHT, IMAGE_WIDTH, MARKER_COLS, MARKER_ROWS
+from ...data.demo_set import Source
+from ...data.images import resize_image
+from ...data.trajectory import open_h5
+from ...tasks.robot import PandaSoftVT
 
 CODEBASE_VERSION = "v3.0"
 FPS = 20  # the control frequency: one frame per env step
@@ -71,14 +71,6 @@ INDEX_FEATURES = {
     "index": {"dtype": "int64", "shape": [1], "names": None},
     "task_index": {"dtype": "int64", "shape": [1], "names": None},
 }
-
-
-@dataclass(frozen=True)
-class Source:
-    """One task's trajectory file and its rendered observations."""
-
-    trajectory_h5: Path
-    rendered_h5: Path
 
 
 # ---------------------------------------------------------------------------------------- keys
@@ -119,7 +111,7 @@ def frame_features(flat: dict[str, np.ndarray], image_size: tuple[int, int] | No
     ``observation.images.tactile_<side>``, ``observation.tactile.<side>.<marker field>``; only those
     the observation has. ``image_size`` resizes every image as the export's ``--image-size`` does
     (None: each stream's own size). A policy trained on the export reads the live env through
-    these (:mod:`mani_skill_softvt.evaluation.lerobot_env`)."""
+    these (:mod:`mani_skill_softvt.integrations.lerobot.env`)."""
     out = {"observation.state": np.concatenate([np.asarray(flat[k]).reshape(-1) for k, _ in STATE_PARTS])
            .astype(np.float32)}
     for feat, key in video_sources().items():
