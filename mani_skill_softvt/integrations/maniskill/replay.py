@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from mani_skill.trajectory import replay_trajectory
 
-from ..... import tasks  # noqa: F401  (registers the SoftVT envs before ManiSkill makes one)
+from ... import tasks  # noqa: F401  (registers the SoftVT envs before ManiSkill makes one)
 from ...data.trajectory import (
     check_h5,
     gripper_action_problem,
