@@ -62,7 +62,7 @@ from .paths import DEMOS_DIR, writable_default
 from .numerics import chosen as chosen_numerics
 from .physics.constants import physics_signature, signature_mismatch
 from .tasks.objects import TWIN_CONTACT_STATE
-from .tasks.robot import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
+from .actions import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
 from .tasks.suites import NUM_TASKS, SUITES, get_suite
 
 

@@ -64,7 +64,7 @@ def main(argv=None) -> dict:
                     help="render the cameras at HxW (default: the size the policy asks for, a trained baseline's "
                          "own, else 224x224); a policy server trained on smaller images needs it")
     ap.add_argument("--control-mode", default=None,
-                    help="any mode the env offers (tasks/robot.py CONTROL_MODES): pd_ee_pose (default), "
+                    help="any mode the env offers (mani_skill_softvt.actions CONTROL_MODES): pd_ee_pose (default), "
                          "pd_ee_pose_binary (the binary-gripper baselines vo-b, vt-b; their default), ManiSkill's "
                          "pd_joint_pos, pd_joint_delta_pos, pd_ee_delta_pose (a ManiSkill diffusion-policy "
                          "checkpoint's default, evaluation/maniskill_dp.py) and their _binary twins")

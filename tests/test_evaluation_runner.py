@@ -91,7 +91,7 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
 
 def test_evaluate_takes_every_control_mode_and_obs_mode_the_env_declares():
     # The modes are declared once, by the env (tasks/robot.py, tasks/softvt_task.py); evaluation reads them.
-    from mani_skill_softvt.tasks.robot import CONTROL_MODES
+    from mani_skill_softvt.actions import CONTROL_MODES
     from mani_skill_softvt.tasks.softvt_task import OBS_MODES
 
     for mode in CONTROL_MODES:

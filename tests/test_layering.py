@@ -66,6 +66,17 @@ def test_the_env_reaches_its_objects_only_through_the_object_interface():
         assert branch not in source, branch
 
 
+def test_the_action_contract_needs_no_simulator():
+    """A policy, a converter or a data file reads actions (modes, gripper encodings, the base frame)
+    without ManiSkill's agent: actions.py imports only the pure transforms."""
+    assert imports_any(PACKAGE / "actions.py", SIMULATORS) == []
+    assert imports_any(PACKAGE / "actions.py", ("mani_skill_softvt",)) == ["mani_skill_softvt.physics.transforms",
+                                                                          "mani_skill_softvt.physics.transforms.down_rotvec",
+                                                                          "mani_skill_softvt.physics.transforms.quat_to_rotvec"]
+    for consumer in ("evaluation/policies.py", "baselines/features.py", "integrations/openpi/remote.py"):
+        assert "mani_skill_softvt.tasks.robot" not in imported_modules(PACKAGE / consumer), consumer
+
+
 def test_the_policy_contract_imports_nothing_of_the_package():
     assert imports_any(PACKAGE / "policy.py", ("mani_skill_softvt",)) == []
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.tasks.robot import GRIPPER_ACTION_VERSION
+from mani_skill_softvt.actions import GRIPPER_ACTION_VERSION
 from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES, list_tasks
 
 RIGID = "SoftVTObjectRigid-v1"
@@ -191,7 +191,7 @@ def test_replay_converts_into_every_control_mode(mp_demo, tmp_path, mode):
 def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mode):
     from mani_skill.utils.wrappers.record import RecordEpisode
 
-    from mani_skill_softvt.tasks.robot import ee_action
+    from mani_skill_softvt.actions import ee_action
 
     env = RecordEpisode(gym.make(env_id, task_id=TASK, obs_mode=obs_mode, render_mode="rgb_array"), str(tmp_path),
                         trajectory_name="t",

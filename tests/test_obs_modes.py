@@ -143,6 +143,6 @@ def test_spatial_instances_have_two_stable_ids_named_as_the_rigid_twins():
 
 
 def _hold(u):
-    from mani_skill_softvt.tasks.robot import ee_action
+    from mani_skill_softvt.actions import ee_action
 
     return ee_action(u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64), 0.0)

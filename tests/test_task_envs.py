@@ -8,7 +8,7 @@ import torch
 from scipy.spatial import cKDTree
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
-from mani_skill_softvt.tasks.robot import ee_action
+from mani_skill_softvt.actions import ee_action
 from mani_skill_softvt.tasks import constants as C
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS, SUITES, list_tasks
 from mani_skill_softvt.tactile.constants import GEL_THICKNESS

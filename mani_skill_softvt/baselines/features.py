@@ -21,7 +21,7 @@ import numpy as np
 from ..data.images import resize_image
 from ..observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
 from ..physics.transforms import down_rotvec
-from ..tasks.robot import base_frame_pose
+from ..actions import base_frame_pose
 from .config import DPConfig
 
 # Bumped whenever frame_features computes anything differently: prepared training data is keyed by it.

@@ -30,7 +30,7 @@ import numpy as np
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
 from ..observations import TCP_POSE, lookup
 from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
-from ..tasks.robot import base_frame_pose
+from ..actions import base_frame_pose
 
 POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
 from ..observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs
-from ..tasks.robot import CONTROL_MODES
+from ..actions import CONTROL_MODES
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
 from .protocols import episodes

@@ -16,7 +16,8 @@ from ..physics.constants import MIN_TET_VOLUME_RATIO
 from ..physics.fem import SimulationInstabilityError
 from ..policy import Policy
 from ..rollout import EvaluatorTrace, Observer, rollout
-from ..tasks.robot import ee_action, mid_height_grasp
+from ..actions import ee_action
+from ..tasks.robot import mid_height_grasp
 
 @dataclass
 class GraspPlan:

@@ -22,7 +22,8 @@ import numpy as np
 
 from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, rotvec_to_quat, yaw_between
 from ..tasks import constants as C
-from ..tasks.robot import ee_action, gripper_action, mid_height_grasp, normalized_gripper
+from ..actions import ee_action, gripper_action, normalized_gripper
+from ..tasks.robot import mid_height_grasp
 from .planner import MotionPlanner, PlanningError, held_object, plan_expert_path
 
 PHASE_STEPS = {"approach": 15, "descend": 15, "close": 12, "lift": 15, "transport": 25, "lower": 15,

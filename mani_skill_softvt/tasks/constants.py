@@ -2,12 +2,12 @@
 
 import numpy as np
 
+from ..actions import GRIPPER_Q_CLOSED, GRIPPER_Q_OPEN, ROBOT_BASE_POSE  # noqa: F401  (the action contract's)
 from ..physics.constants import CONTROL_FREQ, SIM_FREQ  # noqa: F401  (re-exported for tasks)
 
 # Gripper: finger joint q is half the jaw gap. Open = 80 mm gap. The closed target is below
-# zero (ManiSkill's trick) so that a closing drive always presses; the force limit caps it.
-GRIPPER_Q_OPEN = 0.04
-GRIPPER_Q_CLOSED = -0.01
+# zero (ManiSkill's trick) so that a closing drive always presses; the force limit caps it (both
+# targets are the action contract's, mani_skill_softvt/actions.py, as is the robot base pose).
 # Soft drive: the force grows over most of the closure range (contact at g ~ 0.35 on a 45 mm
 # object, the limit reached at g ~ 0.85), so a continuous closure grades the squeeze.
 GRIPPER_STIFFNESS = 4e2  # N/m
@@ -24,8 +24,8 @@ FINGERTIP_OFFSET = {"left": (0.0, 7.58e-3, 45.25e-3), "right": (0.0, -7.58e-3, 4
 # along it (rows): 17.5 x 18.5 mm, longer than the 14.2 mm view, so part of its load is out of view.
 GEL_PAD_HALF_EXTENTS = (FINGERTIP_HALF_EXTENTS[0], FINGERTIP_HALF_EXTENTS[2])
 
-# Robot base placement (as in ManiSkill's tabletop tasks), table top at z = 0.
-ROBOT_BASE_POSE = np.array([-0.615, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+# The table, its top at z = 0 (the robot base's placement, as in ManiSkill's tabletop tasks, is the
+# action contract's ROBOT_BASE_POSE).
 TABLE_HALF_EXTENTS = (0.6, 0.8, 0.025)
 
 MAX_EPISODE_STEPS = 300

@@ -76,7 +76,7 @@ from ..calibration.cards import load_calibration_card
 from ..paths import CALIBRATION_DIR
 from . import constants as C
 from . import rewards
-from .robot import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
+from ..actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
 from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
 from .suites import NUM_TASKS, SUITES, TaskSpec, swapped_side, task_spec
 

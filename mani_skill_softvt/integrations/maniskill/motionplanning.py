@@ -39,7 +39,7 @@ from ...observations import info_bool
 from ...parallel import run_tasks
 from ...tasks import constants as C
 from ...observations import ObsMode
-from ...tasks.robot import CONTROL_MODES
+from ...actions import CONTROL_MODES
 from ...tasks.suites import SUITES, parse_env_id, task_spec
 
 

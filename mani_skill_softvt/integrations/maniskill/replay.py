@@ -55,7 +55,7 @@ from ...data.trajectory import (
 from ...fileio import atomic_write_json, read_json
 from ...observations import ObsMode
 from ...physics.transforms import quat_to_rotvec
-from ...tasks.robot import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
+from ...actions import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
 from ...tasks.suites import parse_env_id, recorded_env_id
 
 PROG = "python -m mani_skill_softvt.replay"

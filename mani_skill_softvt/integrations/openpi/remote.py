@@ -50,7 +50,7 @@ from websockets.exceptions import ConnectionClosed
 
 from ...observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, lookup, tactile_key
 from ...policy import Policy
-from ...tasks.robot import base_frame_pose
+from ...actions import base_frame_pose
 
 ACTION_DIM = 7
 DEFAULT_CONNECT_TIMEOUT = 10.0  # s: TCP + websocket handshake + the server's metadata message
