@@ -28,7 +28,7 @@ import numpy as np
 from mani_skill.utils.common import to_numpy
 
 from .observations import as_bool, info_bool
-from .physics.fem import SimulationInstabilityError
+from .physics.errors import SimulationInstabilityError
 from .policy import is_privileged
 
 UNTIL = ("episode", "plan", "script")

@@ -77,6 +77,13 @@ def test_the_action_contract_needs_no_simulator():
         assert "mani_skill_softvt.tasks.robot" not in imported_modules(PACKAGE / consumer), consumer
 
 
+@pytest.mark.parametrize("module", ["rollout.py", "integrations/lerobot/env.py", "expert/grasp_script.py"])
+def test_handling_a_blow_up_needs_no_fem(module):
+    """The rollout, the LeRobot env and the grasp script catch SimulationInstabilityError; they take it
+    from physics/errors.py, not from the FEM (Warp, Newton)."""
+    assert imports_any(PACKAGE / module, ("mani_skill_softvt.physics.fem",)) == []
+
+
 def test_the_policy_contract_imports_nothing_of_the_package():
     assert imports_any(PACKAGE / "policy.py", ("mani_skill_softvt",)) == []
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..physics.constants import MIN_TET_VOLUME_RATIO
-from ..physics.fem import SimulationInstabilityError
+from ..physics.errors import SimulationInstabilityError
 from ..policy import Policy
 from ..rollout import EvaluatorTrace, Observer, rollout
 from ..actions import ee_action

@@ -29,6 +29,7 @@ import numpy as np
 from ..assets.materials import SoftMaterial  # noqa: F401  (the material type lives with the assets' materials)
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
+from .errors import SimulationInstabilityError  # raised here, defined apart for its handlers
 from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, box_gap, is_quiet, local_bounds, world_boxes
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
 
@@ -57,10 +58,6 @@ def _init_warp() -> None:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
-
-
-class SimulationInstabilityError(RuntimeError):
-    """The FEM simulation blew up (NaN/inf, or nodes faster than anything in a tabletop scene)."""
 
 
 def vbd_schedule(youngs_moduli) -> tuple[int, int]:
