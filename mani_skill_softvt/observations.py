@@ -123,11 +123,16 @@ class ObsMode:
         return self.camera == "sensor_data"
 
 
+def is_native_camera_size(camera_size: tuple[int, int] | None) -> bool:
+    """Whether ``camera_size`` is the cameras' own 224x224 (None says the same)."""
+    return camera_size is None or tuple(int(v) for v in camera_size) == NATIVE_CAMERA_SIZE
+
+
 def camera_sensor_configs(camera_size: tuple[int, int] | None) -> dict:
     """ManiSkill ``sensor_configs`` that render both cameras at ``camera_size`` = (height, width);
     empty for None or the native size. (The GelSights are not cameras: their 240x320 image is
     the sensor's.)"""
-    if camera_size is None or tuple(camera_size) == NATIVE_CAMERA_SIZE:
+    if is_native_camera_size(camera_size):
         return {}
     h, w = (int(v) for v in camera_size)
     if min(h, w) < 8:

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from ..evaluation.policies import PolicyKind, PolicySource
-from ..observations import NATIVE_CAMERA_SIZE, flatten_batch
+from ..observations import flatten_batch, is_native_camera_size
 from ..policy import Policy
 from ..tasks.suites import get_suite
 from .config import DPConfig
@@ -74,7 +74,7 @@ def camera_render_size(ckpt: dict) -> tuple[int, int] | None:
     """(height, width) a policy's training cameras were rendered at, None for the native 224x224
     (policy files from before it was kept were trained on native renderings)."""
     size = ckpt.get("camera_render_size")
-    return tuple(int(v) for v in size) if size and tuple(size) != NATIVE_CAMERA_SIZE else None
+    return None if not size or is_native_camera_size(size) else tuple(int(v) for v in size)
 
 
 def load_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, DiffusionPolicyModel, dict]:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..fileio import file_lock, read_jsonl
-from ..observations import NATIVE_CAMERA_SIZE, camera_sensor_configs, camera_size_name
+from ..observations import NATIVE_CAMERA_SIZE, camera_size_name, is_native_camera_size
 from ..tasks.suites import NUM_TASKS, get_suite
 
 
@@ -117,7 +117,7 @@ class DemoSet:
     def rendered(self, task_id: int, obs_mode: str, camera_size: tuple[int, int] | None = None) -> Path:
         """The task's episodes re-rendered into ``obs_mode`` observations, the cameras at
         ``camera_size`` = (height, width) (None: the native 224x224)."""
-        size = f"_{camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
+        size = "" if is_native_camera_size(camera_size) else f"_{camera_size_name(camera_size)}"
         return self.dir / f"task{task_id}_{obs_mode.replace('+', '_')}{size}.h5"
 
     def rendered_sizes(self, task_id: int, obs_mode: str) -> list[tuple[int, int]]:
@@ -142,7 +142,7 @@ class DemoSet:
         """The (trajectory, rendered) pairs of ``tasks`` (the LeRobot export's and the baselines'
         training input), the renderings with cameras at ``camera_size``; a missing file is named
         with the command that writes it."""
-        size = f" --camera-size {camera_size_name(camera_size)}" if camera_sensor_configs(camera_size) else ""
+        size = "" if is_native_camera_size(camera_size) else f" --camera-size {camera_size_name(camera_size)}"
         out = []
         for t in tasks:
             traj, rendered = self.trajectory(t), self.rendered(t, obs_mode, camera_size)

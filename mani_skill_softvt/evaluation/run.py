@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
-from ..observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs
+from ..observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs, is_native_camera_size
 from ..actions import CONTROL_MODES
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
@@ -93,7 +93,7 @@ class RunConfig:
                 raise ValueError(f"policy {spec} was trained on {h}x{w} cameras; evaluate it at that size (leave "
                                  f"camera_size out), not {camera_size[0]}x{camera_size[1]}")
         camera_size = camera_size or source.camera_size
-        if camera_size == NATIVE_CAMERA_SIZE:
+        if is_native_camera_size(camera_size):
             camera_size = None
         camera_sensor_configs(camera_size)  # a size too small is an error here, naming it, not in a worker
         if suite not in SUITES:
