@@ -90,13 +90,17 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
 
 
 def test_evaluate_takes_every_control_mode_and_obs_mode_the_env_declares():
-    # The modes are declared once, by the env (tasks/robot.py, tasks/softvt_task.py); evaluation reads them.
+    # The modes are declared once (the action contract; the observation contract's parser, the env's);
+    # evaluation reads them. With no obs mode named, a policy that names none runs in the env's default.
     from mani_skill_softvt.actions import CONTROL_MODES
-    from mani_skill_softvt.tasks.softvt_task import OBS_MODES
+    from mani_skill_softvt.observations import DEFAULT_OBS_MODE, OBS_MODES
 
     for mode in CONTROL_MODES:
         assert RunConfig.resolve("random", control_mode=mode).control_mode == mode
-    for mode in OBS_MODES:
+    for mode in (*OBS_MODES, "rgb+depth+segmentation+state+tactile", "rgb+pointcloud"):
         assert RunConfig.resolve("random", obs_mode=mode).obs_mode == mode
+    assert RunConfig.resolve("random").obs_mode == DEFAULT_OBS_MODE == "state"
+    with pytest.raises(ValueError, match="--obs-mode obs_mode 'rgbd\\+depht'"):
+        RunConfig.resolve("random", obs_mode="rgbd+depht")
     with pytest.raises(ValueError, match="--control-mode pd_bogus: choose one of .*pd_joint_pos"):
         RunConfig.resolve("random", control_mode="pd_bogus")
