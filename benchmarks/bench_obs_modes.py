@@ -13,44 +13,11 @@ which PickCube-v1 has no counterpart for. CPU, one process, the pinned numerics.
 from __future__ import annotations
 
 import argparse
-import time
 
-import gymnasium as gym
 import numpy as np
+from bench_render import pickcube_obs, softvt_obs  # the same measurements, one mode more (run as a script)
 
 MODES = ("rgb", "depth", "segmentation", "rgbd", "rgb+depth+segmentation", "pointcloud", "sensor_data", "rgb+normal")
-
-
-def time_obs(env, frames: int) -> float:
-    """Milliseconds per ``get_obs`` (after one untimed call: first render)."""
-    u = env.unwrapped
-    u.get_obs()
-    t0 = time.perf_counter()
-    for _ in range(frames):
-        u.get_obs()
-    return 1e3 * (time.perf_counter() - t0) / frames
-
-
-def pickcube_obs(mode: str, size: int, frames: int) -> float:
-    import mani_skill.envs  # noqa: F401  (registers PickCube-v1)
-
-    # PickCube's camera takes ManiSkill's own shader for each texture; "normal" needs its default pack.
-    configs = {"width": size, "height": size, **({"shader_pack": "default"} if "normal" in mode else {})}
-    env = gym.make("PickCube-v1", obs_mode=mode, sensor_configs=configs)
-    env.reset(seed=0)
-    ms = time_obs(env, frames)
-    env.close()
-    return ms
-
-
-def softvt_obs(mode: str, size: int, frames: int) -> float:
-    from mani_skill_softvt.evaluation.wrapper import make_env
-
-    env = make_env("object_soft", 3, dsr=False, obs_mode=mode, camera_size=(size, size))
-    env.reset(seed=0)
-    ms = time_obs(env, frames)
-    env.close()
-    return ms
 
 
 def main(argv=None) -> list[dict]:
@@ -62,7 +29,7 @@ def main(argv=None) -> list[dict]:
 
     rows = []
     for mode in MODES:
-        base = pickcube_obs(mode, args.size, args.frames)
+        base = pickcube_obs(args.size, args.frames, mode)
         ms = softvt_obs(mode, args.size, args.frames)
         touch = softvt_obs(f"{mode}+tactile", args.size, args.frames)
         rows.append({"mode": mode, "pickcube_ms": base, "softvt_ms": ms, "tactile_ms": touch, "ratio": ms / 2 / base})

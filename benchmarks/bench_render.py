@@ -40,10 +40,12 @@ def time_obs(env, frames: int) -> float:
     return 1e3 * (time.perf_counter() - t0) / frames
 
 
-def pickcube_obs(size: int, frames: int) -> float:
+def pickcube_obs(size: int, frames: int, obs_mode: str = "rgb") -> float:
     import mani_skill.envs  # noqa: F401
 
-    env = gym.make("PickCube-v1", obs_mode="rgb", sensor_configs={"width": size, "height": size})
+    # "normal" and "albedo" need ManiSkill's default shader pack (its minimal one renders neither).
+    shader = {"shader_pack": "default"} if {"normal", "albedo"} & set(obs_mode.split("+")) else {}
+    env = gym.make("PickCube-v1", obs_mode=obs_mode, sensor_configs={"width": size, "height": size, **shader})
     env.reset(seed=0)
     ms = time_obs(env, frames)
     env.close()
