@@ -106,11 +106,13 @@ def accepted_demos_expected(demo_set: DemoSet, task_id: int, num: int, accepted:
 
 
 def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out: Path, planner: str,
-                   control_mode: str, queue) -> dict:
+                   control_mode: str, screen_only: bool, queue) -> dict:
     """Record one task's demos: the first ``num`` training seeds, or with ``accepted`` training seeds
     in order until that many are accepted (at most ``num`` seeds), keeping every seed generated
     before (a smaller ``accepted`` never shrinks the set, nor its renderings). The progress queue
-    gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before)."""
+    gets one per seed, or with ``accepted`` one per accepted demo the task holds (recorded now or before).
+    ``screen_only``: record only seeds the QC log does not list (its verdicts stand for the episodes that
+    are not on this machine) and merge nothing, see :func:`generate`."""
     demo_set = DemoSet(out, suite)
     with demo_set.task_lock(task_id):  # another run may hold it: its verdicts are read after it
         qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
@@ -121,7 +123,8 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
             if accepted is not None and kept >= accepted and seed not in qc:
                 break
             seeds.append(seed)
-            if not (seed in qc and not (qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists())):
+            missing = seed in qc and qc[seed]["accepted"] and not demo_set.episode_file(task_id, seed).exists()
+            if seed not in qc or (missing and not screen_only):
                 # New, or accepted but its file is not here: the QC logs are committed, the demos are
                 # not, so a fresh checkout records the accepted episodes again (its new verdict is appended).
                 if env is None:
@@ -139,6 +142,8 @@ def _generate_task(suite: str, task_id: int, num: int, accepted: int | None, out
                 queue.put(1)
         if env is not None:
             env.close()
+        if screen_only:
+            return _task_report(demo_set, task_id, seeds)
         return _merge_task(suite, task_id, seeds, out, recorded)
 
 
@@ -174,15 +179,22 @@ def _merge_task(suite: str, task_id: int, seeds: list[int], out: Path, recorded:
             merge_trajectories(str(tmp_h5), [str(p) for p in accepted])
         os.replace(tmp_json, final_json)
         os.replace(tmp_h5, final_h5)
+    return _task_report(demo_set, task_id, seeds)
+
+
+def _task_report(demo_set: DemoSet, task_id: int, seeds: list[int]) -> dict:
+    """A task's row of ``qc_report.json``, from its QC log's verdicts on ``seeds``."""
+    qc = {r["seed"]: r for r in demo_set.verdicts(task_id)}
     rejected = {s: qc[s]["problems"] for s in seeds if s in qc and not qc[s]["accepted"]}
-    return {"task_id": task_id, "generated": sum(s in qc for s in seeds), "accepted": len(accepted), "rejected": rejected,
+    return {"task_id": task_id, "generated": sum(s in qc for s in seeds),
+            "accepted": sum(bool(qc.get(s, {}).get("accepted")) for s in seeds), "rejected": rejected,
             "train_seeds": [seeds[0], seeds[-1]] if seeds else None,
             "seconds_per_demo": float(np.mean([qc[s]["wall_s"] for s in seeds if s in qc])) if qc else None}
 
 
 def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1,
              ray_address: str | None = None, planner: str | None = None, control_mode: str = "pd_ee_pose",
-             accepted: int | None = None) -> dict:
+             accepted: int | None = None, screen_only: bool = False) -> dict:
     """Record expert demos per task, one work item per task (local processes or Ray tasks): the
     first ``num`` training seeds, or with ``accepted`` training seeds in order until that many
     demos are accepted, drawing at most ``num`` seeds (a task whose expert fails on some seeds
@@ -194,6 +206,12 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     ``control_mode``: the recorded actions, ``pd_ee_pose`` (the paper's, what the baselines train
     on) or ``pd_joint_pos`` (ManiSkill's motion-planning format, which ``replay -c`` converts into
     every other mode).
+
+    ``screen_only``: grow the set's QC logs (which seeds are accepted) without recording again the
+    accepted episodes a log lists that are not on this machine, and without merging. Under the
+    pinned numerics an episode recorded again is the same bits, so the logs define the set; a
+    campaign spread over sessions on machines that keep nothing screens the seeds first and
+    records the set once, on the machine that trains on it (a run without ``screen_only``).
 
     With ``ray_address`` the tasks write their episodes on the Ray worker's node, so on a
     multi-node cluster ``out`` must be on a shared filesystem.
@@ -232,7 +250,8 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
     bar = tqdm(total=total, desc=f"demos {suite}", unit="accepted demo" if accepted else "seed")
     results = []
     out_abs = Path(out).resolve()  # workers (Ray's above all) need not share our working directory
-    for kind, value in run_tasks(_generate_task, [(suite, t, num, accepted, out_abs, planner, control_mode) for t in tasks],
+    for kind, value in run_tasks(_generate_task, [(suite, t, num, accepted, out_abs, planner, control_mode, screen_only)
+                                                  for t in tasks],
                                  workers, ray_address):
         if kind == "message":
             bar.update(value)
@@ -337,6 +356,7 @@ def stats(suite: str, out: Path) -> dict:
         rows.append({"task_id": t, "generated": len(qc), "accepted": len(eps), "success_rate": len(eps) / len(qc),
                      **_r_max_summary(r),
                      "length_mean": float(np.mean([e["steps"] for e in eps])) if eps else None,
+                     "recorded_here": sum(demo_set.episode_file(t, e["seed"]).exists() for e in eps),
                      "seconds_per_demo": float(np.mean(walls)) if walls else None,
                      "rejected": dict(Counter(p for q in qc for p in q.get("problems", []))),
                      "rerecorded": rerecord_agreement(log)})
@@ -364,7 +384,9 @@ def _unreadable_files(demo_set: DemoSet, task_id: int, accepted: list[dict]) -> 
     """Why each of the task's demo files that should be readable is not: the accepted episodes and
     the merged trajectory are read in full (states only, small); renderings (images, large) are
     opened, which is where a truncated HDF5 file fails."""
-    files = [demo_set.episode_file(task_id, q["seed"]) for q in accepted]
+    # An accepted episode that is not here is not unreadable: a set screened elsewhere
+    # (generate --screen-only) lists it; `recorded_here` in the stats counts those that are.
+    files = [p for p in (demo_set.episode_file(task_id, q["seed"]) for q in accepted) if p.exists()]
     files += [p for p in (demo_set.trajectory(task_id),) if p.exists()]
     problems = [check_h5(p) for p in files] + [check_h5(p, read=False) for p in demo_set.renderings(task_id)]
     return [p for p in problems if p]
@@ -392,6 +414,10 @@ def format_stats(summary: dict) -> str:
     lines.append("-" * len(head))
     lines.append(f"{'all':>4}  {summary['accepted']:>4}/{summary['generated']:<4}  {num(summary['r_max_median'], '9.3f')}  "
                  f"{num(summary['r_max_p95'], '9.3f')}  {summary['r_max_above_1']:>3}")
+    here = sum(r.get("recorded_here", r["accepted"]) for r in summary["tasks"])
+    if here < summary["accepted"]:
+        lines.append(f"on this machine: {here} of the {summary['accepted']} accepted episodes (the others screened "
+                     f"elsewhere; generate without --screen-only records them, the same bits)")
     again = summary.get("rerecorded") or {}
     if again.get("repeats"):
         n, seed = again["repeats"], again["r_max_largest_difference_seed"]
@@ -515,6 +541,10 @@ def _parser() -> argparse.ArgumentParser:
                    "--accepted, the most seeds a task may draw")
     g.add_argument("--accepted", type=int, default=None, metavar="N",
                    help="draw training seeds in order until N demos of each task are accepted (at most --num seeds)")
+    g.add_argument("--screen-only", action="store_true",
+                   help="record only seeds the QC logs do not list, keep their verdicts for accepted episodes that "
+                        "are not on this machine, merge nothing: grows the set's QC logs; run again without it "
+                        "on the machine that trains (it records the listed episodes, the same bits, and merges)")
     g.add_argument("--workers", type=int, default=1)
     g.add_argument("--ray", metavar="ADDRESS", default=None,
                    help="run the tasks on Ray instead of --workers processes: 'local', 'auto' or ray://host:10001")
@@ -572,7 +602,8 @@ def _generate(ap: argparse.ArgumentParser, args) -> dict:
         ap.error("--num and --workers must be >= 1")
     try:
         report = generate(args.suite, tasks, args.num, args.out, args.workers, ray_address=args.ray,
-                          planner=args.planner, control_mode=args.control_mode, accepted=args.accepted)
+                          planner=args.planner, control_mode=args.control_mode, accepted=args.accepted,
+                          screen_only=args.screen_only)
     except ValueError as err:  # a bad --accepted, or a set recorded under other physics or actions
         ap.error(str(err))
     for r in report["tasks"]:

@@ -12,6 +12,10 @@
 # on some seeds: pastry010 rocks in the basket after release), at most MAX_SEEDS seeds. After each
 # round the new episodes are rendered (rgb+tactile, cameras at RENDER_SIZE, default 84x84: the cpu
 # baselines' input; RENDER_SIZE=none skips it); renderings, like the episodes, stay in the store.
+# SCREEN_ONLY=1: grow the QC logs only (generate --screen-only: the accepted episodes the committed
+# logs list are not recorded again, nothing is merged or rendered): a set grown over sessions on
+# machines that keep nothing; the machine that trains runs it once more without, which records the
+# whole set (the same bits under the pinned numerics), merges and renders it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}; MAX_SEEDS=${4:-250}
@@ -46,10 +50,11 @@ sync_back() {
 trap sync_back EXIT
 generate() {  # ACCEPTED [generate's other flags]
   local k=$1; shift
-  "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --out "$SOFTVT_DEMOS_DIR" "$@"
+  "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --out "$SOFTVT_DEMOS_DIR" \
+    ${SCREEN_ONLY:+--screen-only} "$@"
 }
 render() {  # [render's other flags]
-  if [ "${RENDER_SIZE:-84x84}" != none ]; then
+  if [ "${RENDER_SIZE:-84x84}" != none ] && [ -z "${SCREEN_ONLY:-}" ]; then
     "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
       --out "$SOFTVT_DEMOS_DIR" "$@"
   fi

@@ -6,6 +6,9 @@
 # their small products (manifest, QC logs, QC report, stats, R_max histogram) copied into demos/ after
 # every round for the commit. Run it again in any later session: each round skips what its QC logs
 # list; on a machine without the episodes they are recorded again from the committed logs.
+# SCREEN_ONLY=1 (passed on to campaign_demos.sh): grow the QC logs only, without recording again the
+# accepted episodes a new machine lacks, nor merging or rendering; the training machine runs it once
+# more without.
 # Recorded under the pinned numerics (mani_skill_softvt/numerics.py): the episodes replay anywhere.
 # Run it from a git worktree at a fixed commit (no code change under a running job), e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \

@@ -107,6 +107,29 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
         format_stats(summary) + "\n"
 
 
+def test_screening_grows_the_qc_log_without_recording_again_what_it_lists(tmp_path):
+    """generate --screen-only (a set grown over sessions on machines that keep nothing): an accepted
+    seed the committed log lists is not recorded again, the next seed is drawn and recorded, nothing
+    is merged, and the stats count the listed episode as accepted but not on this machine."""
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.data.seeds import train_seed
+    from mani_skill_softvt.fileio import append_jsonl
+
+    demo_set = DemoSet(tmp_path, "object_rigid")
+    first = train_seed(3, 0)
+    listed = {"seed": first, "planner": "mplib", "accepted": True, "problems": [], "steps": 100, "r_max": 0.5,
+              "wall_s": 1.0}
+    append_jsonl(demo_set.qc_log(3), listed)
+    (row,) = generate("object_rigid", [3], 2, tmp_path, accepted=2, screen_only=True)["tasks"]
+    assert (row["generated"], row["accepted"]) == (2, 2), row
+    assert [q["seed"] for q in demo_set.read_qc(3)] == [first, first + 1]  # the listed seed: not recorded again
+    assert not demo_set.episode_file(3, first).exists() and demo_set.episode_file(3, first + 1).exists()
+    assert not demo_set.trajectory(3).exists()  # a subset is never merged as if it were the set
+    summary = stats("object_rigid", tmp_path)
+    assert (summary["accepted"], summary["tasks"][0]["recorded_here"], summary["unreadable_files"]) == (2, 1, [])
+    assert "on this machine: 1 of the 2 accepted episodes" in format_stats(summary)
+
+
 @pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_path, capsys):
     """A task whose expert fails on a seed still ends with the demos asked for: the rejected seed
