@@ -130,10 +130,10 @@ def policy_costs(variant: str, obs, calls: int) -> tuple[float, float, int]:
     """(ms per step of the inputs, ms per denoised chunk, action_steps) of the cpu preset's policy."""
     import torch
 
-    from mani_skill_softvt.baselines.config import make_config
-    from mani_skill_softvt.baselines.features import frame_features
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
-    from mani_skill_softvt.baselines.train import empty_stats
+    from softvt_campaign.baselines.config import make_config
+    from softvt_campaign.baselines.features import frame_features
+    from softvt_campaign.baselines.model import DiffusionPolicyModel, noise_scheduler
+    from softvt_campaign.baselines.train import empty_stats
     from mani_skill_softvt.observations import flatten_batch
 
     torch.set_num_threads(1)
@@ -170,7 +170,7 @@ def main(argv=None) -> dict:
     from mani_skill_softvt.data.seeds import id_seed
 
     seed = id_seed(args.task, 0)
-    from mani_skill_softvt.baselines.config import make_config
+    from softvt_campaign.baselines.config import make_config
 
     cfg = make_config("vt-c")
     with tqdm(total=9, desc="benchmark", unit="row") as bar:

@@ -70,9 +70,9 @@ def time_setting(variant: str, precision: str, channels_last: bool, steps: int,
                  chunks: int) -> tuple[float, float, float | None]:
     """(ms per training step, ms per denoised chunk, the same with the weights cast per U-Net call
     (bf16 only, else None)) of one setting."""
-    from mani_skill_softvt.baselines.config import make_config
-    from mani_skill_softvt.baselines.model import noise_scheduler
-    from mani_skill_softvt.baselines.train import Training, empty_stats
+    from softvt_campaign.baselines.config import make_config
+    from softvt_campaign.baselines.model import noise_scheduler
+    from softvt_campaign.baselines.train import Training, empty_stats
 
     cfg = make_config(variant, "cpu", precision=precision, threads=0)
     run = Training(cfg, empty_stats(cfg), steps=steps + 3)
@@ -106,9 +106,9 @@ def time_demo_windows(variant: str, demos, suite: str, tasks: list[int], cache, 
                       blocks: int = 5) -> dict:
     """Median ms per preset training step on the demo windows and on the synthetic batch, and per
     batch gather alone, over ``blocks`` alternating blocks of ``steps // blocks`` steps."""
-    from mani_skill_softvt.baselines.config import make_config
-    from mani_skill_softvt.baselines.dataset import load_windows
-    from mani_skill_softvt.baselines.train import Training, batch_indices
+    from softvt_campaign.baselines.config import make_config
+    from softvt_campaign.baselines.dataset import load_windows
+    from softvt_campaign.baselines.train import Training, batch_indices
 
     cfg = make_config(variant, "cpu", suite=suite, tasks=tuple(tasks), threads=0)
     windows = load_windows(cfg, demos, cache)

@@ -12,10 +12,8 @@ default tests check against the committed goldens (``tests/golden/fingerprints.j
   (``tactile``), so a difference is traced to the part that made it;
 - ``tactile_frame``: the GelSight model alone on a fixed sphere pressed, sheared and twisted
   into the gel (pressure and rigid models): image, indentation map and markers;
-- ``dp_inference``: a committed Diffusion Policy's action chunk for a fixed observation window
-  and noise seed (its bfloat16 encoders and U-Net, DDIM);
-- ``dp_training``: a small Diffusion Policy config trained some steps on fixed synthetic windows:
-  the weights, EMA and losses;
+- ``dp_inference`` and ``dp_training``: the Diffusion Policy baselines' cases, in the campaign's
+  distribution (:mod:`softvt_campaign.fingerprints`, which the library does not import);
 - ``calibration_trial``: one calibration trial (asset 0, closure 0.6) on SoftGraspLift-v1;
 - ``record``: the evaluator's record of a committed policy's first ID episode of task 0 (all
   fields but the wall time, the stack, the numerics and the package version).
@@ -121,72 +119,6 @@ def tactile_frame() -> dict:
     return {**out, "episode": sha(out)}
 
 
-def _synthetic_window(cfg, model, rng: np.random.Generator, batch: int) -> dict:
-    """Observation windows of ``batch`` samples with fixed pseudo-random content."""
-    import torch
-
-    t = cfg.obs_horizon
-    obs = {"state": torch.from_numpy(rng.normal(size=(batch, t, cfg.state_dim)).astype(np.float32))}
-    for k in model.image_keys:
-        h, w = cfg.tactile_size if k.startswith("tactile") else cfg.camera_size
-        c = cfg.tactile_channels if k.startswith("tactile") else 3
-        obs[k] = torch.from_numpy(rng.integers(0, 256, (batch, t, h, w, c), dtype=np.uint8))
-    if cfg.tactile:
-        obs["markers"] = torch.from_numpy(rng.normal(size=(batch, t, 2, cfg.marker_count, 2)).astype(np.float32))
-    return obs
-
-
-def dp_inference(policy: str | Path = "baselines/policies/vt-c-cpu.pt") -> dict:
-    """A committed policy's action chunk for a fixed observation window (one thread, as evaluated)."""
-    import torch
-
-    from .baselines.agent import load_policy_file
-    from .baselines.model import noise_scheduler
-
-    cfg, model, _ = load_policy_file(Path(policy))
-    model.eval()
-    obs = _synthetic_window(cfg, model, np.random.default_rng(0), 1)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        chunk = model.sample(obs, torch.Generator().manual_seed(0), noise_scheduler(cfg, inference=True))
-    finally:
-        torch.set_num_threads(threads)
-    return {"chunk": chunk.numpy().round(6).tolist()[0][:2], "episode": sha(chunk)}
-
-
-def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
-    """A small Diffusion Policy (the ``cpu`` preset's architecture, narrower; bfloat16 mixed
-    precision) trained ``steps`` steps of batch 8 on fixed synthetic windows, on one thread."""
-    import torch
-
-    from .baselines.config import make_config
-    from .baselines.dataset import DemoWindows
-    from .baselines.model import DiffusionPolicyModel, empty_stats
-    from .baselines.train import Training
-
-    cfg = make_config(variant, camera_size=(32, 32), tactile_size=(24, 32), encoder_widths=(8, 16),
-                      encoder_blocks=(1, 1), image_feature_dim=16, unet_dims=(16, 32), timestep_embed_dim=16,
-                      unet_groups=4, batch_size=8, steps=steps, warmup_steps=10, train_timesteps=50, threads=1)
-    rng = np.random.default_rng(0)
-    episodes, length = 4, 20
-    probe = DiffusionPolicyModel(cfg, empty_stats(cfg))
-    frames = {k: v[:, 0].numpy() for k, v in _synthetic_window(cfg, probe, rng, episodes * (length + 1)).items()}
-    actions = rng.normal(size=(episodes * length, cfg.action_dim)).astype(np.float32)
-    windows = DemoWindows(frames, actions, np.arange(episodes + 1) * (length + 1), np.arange(episodes + 1) * length, cfg)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        run = Training(cfg, windows.stats(), steps)
-        for _ in range(steps):
-            run.train_step(windows)
-    finally:
-        torch.set_num_threads(threads)
-    weights = {"model": run.model.state_dict(), "ema": run.policy_state()}
-    return {"last_loss": round(run.losses[-1], 6), "losses": sha(run.losses), "weights": sha(weights),
-            "episode": sha([weights, run.losses])}
-
-
 def calibration_trial() -> dict:
     """One calibration trial (asset 0, closure 0.6)."""
     import gymnasium as gym
@@ -221,5 +153,4 @@ def policy_record(policy: str = "baselines/policies/object_rigid/vt-c-cpu.pt", s
 
 CASES = {"expert_soft": lambda: expert_episode("SoftVTObjectSoft-v1"),
          "expert_rigid": lambda: expert_episode("SoftVTObjectRigid-v1"),
-         "tactile_frame": tactile_frame, "dp_inference": dp_inference, "dp_training": dp_training,
-         "calibration_trial": calibration_trial, "record": policy_record}
+         "tactile_frame": tactile_frame, "calibration_trial": calibration_trial, "record": policy_record}

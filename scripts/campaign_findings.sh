@@ -72,7 +72,7 @@ closure_study() {  # TASK: both rigid policies' closures on 10 ID seeds; skipped
   step "closure study, Object-Rigid task $task, VO-C and VT-C"
   mkdir -p "$out"
   local rc=0
-  "$PY" -m mani_skill_softvt.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
+  "$PY" -m softvt_campaign.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
     baselines/policies/object_rigid/vt-c-cpu.pt --suite object_rigid --task "$task" --episodes 10 \
     --demos "$SOFTVT_DEMOS_DIR" --out "$out" || rc=$?
   # Exit status 1 with its report written: some records differ from the committed ones (another

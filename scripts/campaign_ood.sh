@@ -23,4 +23,4 @@ for p in "${policies[@]}"; do
 done
 ood=()
 for p in "${policies[@]}"; do ood+=("baselines/results/object_soft_ood_$p.jsonl"); done
-"$PY" -m mani_skill_softvt.studies.ood_results "${ood[@]}" --twins baselines/results/twins --out baselines/results
+"$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins baselines/results/twins --out baselines/results

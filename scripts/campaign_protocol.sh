@@ -27,16 +27,16 @@ sub=$([ "$SUITE" = object_soft ] || echo "$SUITE/")
 run=$SOFTVT_RUNS_DIR/final/$sub$NAME
 policy=baselines/policies/$sub$NAME.pt
 read -r -a sets <<< "${SET:-}"
-"$PY" -m mani_skill_softvt.baselines.train --variant "$VARIANT" --recipe "$RECIPE" --set threads=1 "suite=$SUITE" \
+"$PY" -m softvt_campaign.baselines.train --variant "$VARIANT" --recipe "$RECIPE" --set threads=1 "suite=$SUITE" \
   "${sets[@]}" --demos "$SOFTVT_DEMOS_DIR" --out "$run" --cache "$SOFTVT_RUNS_DIR/data_cache" --budget-min "$BUDGET" \
   --snapshot-every 3000
 if [ ! -f "$run/policy.pt" ]; then
   echo "training stopped at its time budget; run the same command again to continue"; exit 0
 fi
 mkdir -p "$(dirname "$policy")"
-"$PY" -m mani_skill_softvt.baselines.export "$run/policy.pt" "$policy" --if-changed
+"$PY" -m softvt_campaign.baselines.export "$run/policy.pt" "$policy" --if-changed
 "$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task 50 \
   --workers "$WORKERS" --out baselines/results
 shopt -s nullglob
-"$PY" -m mani_skill_softvt.studies.results baselines/results/object_soft_id_*.jsonl \
+"$PY" -m softvt_campaign.studies.results baselines/results/object_soft_id_*.jsonl \
   baselines/results/object_rigid_id_*.jsonl --legacy baselines/results/old_physics/*.jsonl --out baselines/results

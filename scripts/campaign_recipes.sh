@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Baselines campaign, step 2 (docs/baselines.md): the recipe search, resumable across sessions.
 #   bash scripts/campaign_recipes.sh [VARIANT=vo-c] [BUDGET_MIN=150] [RECIPE ...]
-# Trains the named recipes (mani_skill_softvt/baselines/config.py: RECIPES, run by studies/recipe_search.py; default: all, in
+# Trains the named recipes (campaign/softvt_campaign/baselines/config.py: RECIPES, run by studies/recipe_search.py; default: all, in
 # order) on the step-1 demos (SOFTVT_DEMOS_DIR, default /root/softvt-demos, rendered at 84x84),
 # each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
 # spent; run again to continue. Runs (checkpoints, prepared data) stay beside the demos
@@ -16,8 +16,8 @@ export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 PY=${PY:-.venv/bin/python}
 recipes=("$@")
 if (( ${#recipes[@]} == 0 )); then
-  mapfile -t recipes < <("$PY" -c "from mani_skill_softvt.studies.recipe_search import RECIPES; print(*RECIPES, sep='\n')")
+  mapfile -t recipes < <("$PY" -c "from softvt_campaign.studies.recipe_search import RECIPES; print(*RECIPES, sep='\n')")
 fi
 read -r -a sets <<< "${SET:-}"
-"$PY" -m mani_skill_softvt.studies.recipe_search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
+"$PY" -m softvt_campaign.studies.recipe_search --variant "$VARIANT" --recipes "${recipes[@]}" --budget-min "$BUDGET" \
   --demos "$SOFTVT_DEMOS_DIR" --runs "$SOFTVT_RUNS_DIR" --demos-per-task 90 --heldout 10 --set "${sets[@]}"

@@ -1,6 +1,6 @@
 """Fingerprints of the physics, the renderer, the tactile images, the policies and the evaluator.
 
-Prints one SHA-256 per case (mani_skill_softvt/fingerprints.py says what each covers), for
+Prints one SHA-256 per case (mani_skill_softvt/fingerprints.py and campaign/softvt_campaign/fingerprints.py say what each covers), for
 checking a code move bit for bit on one machine:
 
     .venv/bin/python scripts/fingerprint.py --out before.json              # at the old commit
@@ -19,10 +19,12 @@ import json
 import sys
 from pathlib import Path
 
-from mani_skill_softvt.fingerprints import CASES, policy_record
+from mani_skill_softvt.fingerprints import CASES as LIBRARY_CASES, policy_record
+from softvt_campaign.fingerprints import CASES as BASELINE_CASES
 from mani_skill_softvt.numerics import machine_kind, resolved
 from mani_skill_softvt.stack import software_stack
 
+CASES = {**LIBRARY_CASES, **BASELINE_CASES}
 DEFAULT_CASES = ["expert_soft", "expert_rigid", "tactile_frame", "dp_inference", "dp_training", "calibration_trial",
                  "record"]
 

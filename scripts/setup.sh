@@ -11,7 +11,8 @@
 #      (stable's mesa 22.3 lavapipe lacks descriptorBindingPartiallyBound; SAPIEN then finds
 #      no rendering device). The backports suite uses the mirror URI the machine's own Debian
 #      sources already use.
-#   2. A virtual environment in .venv with torch 2.13.0 (CPU) installed first, then the package.
+#   2. A virtual environment in .venv with torch 2.13.0 (CPU) installed first, then the package and the
+#      campaign (campaign/: the Diffusion Policy baselines and their studies).
 #      SOFTVT_TORCH_INDEX_URL: the index torch comes from. Unset, pip's own configuration decides
 #      (on this project's machines a local CPU wheel); on a machine whose default is PyPI's
 #      multi-GB CUDA build (Linux x86_64), point it at PyTorch's CPU wheel index:
@@ -60,7 +61,8 @@ fi
 
 # ---------------------------------------------------------------- 2. venv + pip
 stamp="$VENV/.softvt-installed"
-want=$(cat pyproject.toml scripts/setup.sh "$CONSTRAINTS" plugins/lerobot_env_softvt/pyproject.toml | sha256sum | cut -c1-16)
+want=$(cat pyproject.toml scripts/setup.sh "$CONSTRAINTS" plugins/lerobot_env_softvt/pyproject.toml campaign/pyproject.toml \
+  | sha256sum | cut -c1-16)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   log "virtual environment $VENV up to date"
 elif [ "$STACK" = default ]; then
@@ -74,8 +76,11 @@ elif [ "$STACK" = default ]; then
     "$VENV/bin/python" -m pip install -q torch==2.13.0
   fi
   "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e ".[dev,remote]"
+  # The campaign's distribution beside it: the Diffusion Policy baselines (the diffusion_policy policy
+  # kind every committed policy file needs) and the studies.
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e campaign
   echo "$want" > "$stamp"
-  log "installed the package into $VENV"
+  log "installed the package and the campaign into $VENV"
 else
   # LeRobot 0.6.1 needs Python >= 3.12: the machine's python3.12, else pyenv's.
   # (A pyenv shim on PATH may name python3.12 and still refuse to run it: each candidate is tried.)
@@ -98,5 +103,5 @@ else
 fi
 
 # ---------------------------------------------------------------- 3. Warp kernel cache
-"$VENV/bin/python" -m mani_skill_softvt.warmup
+"$VENV/bin/python" -m mani_skill_softvt.cli.warmup
 log "done ($STACK stack). Activate with: source $VENV/bin/activate"

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import torch
 
-from mani_skill_softvt.baselines import train as T
-from mani_skill_softvt.baselines.agent import DiffusionPolicyAgent, load_policy_file
-from mani_skill_softvt.baselines.config import make_config, parse_override
-from mani_skill_softvt.baselines.dataset import load_windows
-from mani_skill_softvt.baselines.features import robot_state, tactile_image
+from softvt_campaign.baselines import train as T
+from softvt_campaign.baselines.agent import DiffusionPolicyAgent, load_policy_file
+from softvt_campaign.baselines.config import make_config, parse_override
+from softvt_campaign.baselines.dataset import load_windows
+from softvt_campaign.baselines.features import robot_state, tactile_image
 from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.evaluation.policies import load_policy
 from mani_skill_softvt.physics.transforms import down_quat, down_rotvec
@@ -135,8 +135,8 @@ def test_bf16_mixed_precision_stays_within_bfloat16_rounding_of_float32():
     # errors of a few dozen layers add up at random (sqrt(n) 2^-9, ~2 %). The same weights in
     # float32 and bf16 give features and noise predictions that close, in float32; channels-last
     # is only another memory layout (float32 summation-order differences, ~1e-6).
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
-    from mani_skill_softvt.baselines.networks import ImageEncoder
+    from softvt_campaign.baselines.model import DiffusionPolicyModel
+    from softvt_campaign.baselines.networks import ImageEncoder
 
     cfg32 = make_config("vt-c", **{**TINY, "precision": "fp32"})
     cfg16 = make_config("vt-c", **{**TINY, "precision": "bf16"})
@@ -170,7 +170,7 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
 
     from torch.utils._python_dispatch import TorchDispatchMode
 
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel, noise_scheduler
+    from softvt_campaign.baselines.model import DiffusionPolicyModel, noise_scheduler
 
     cfg = make_config("vt-c", **{**TINY, "precision": "bf16"})
     torch.manual_seed(0)
@@ -218,7 +218,7 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
 
 def test_paper_preset_has_the_papers_parameter_count():
     # Appendix, table of VO/VT variants: Diffusion Policy VO has 329.2M trainable parameters.
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
+    from softvt_campaign.baselines.model import DiffusionPolicyModel
 
     cfg = make_config("vo-c", "paper")
     n = sum(p.numel() for p in DiffusionPolicyModel(cfg, T.empty_stats(cfg)).parameters())
@@ -265,7 +265,7 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
     w3 = load_windows(make_config("vo-c", **{**TINY, "camera_size": (8, 8)}), tmp_path / "demos", cache)
     entries = sorted(p.name for p in cache.iterdir() if not p.name.startswith("."))
     assert w3.frames["base"].shape[1:3] == (8, 8) and entries == sorted([w1.key, w3.key])
-    from mani_skill_softvt.baselines import dataset as D
+    from softvt_campaign.baselines import dataset as D
 
     # Arrays another entry holds byte for byte are shared (hard links), the rest are the entry's own:
     # the 8x8 entry reads the same state and actions but other camera frames.
@@ -333,7 +333,7 @@ def test_windows_cache_is_reused_and_rebuilt_when_the_inputs_change(tmp_path, mo
 
 
 def test_the_rendering_read_is_the_policys_size_or_the_smallest_larger_one():
-    from mani_skill_softvt.baselines.dataset import render_size_for
+    from softvt_campaign.baselines.dataset import render_size_for
 
     available = [(84, 84), (128, 128), (224, 224)]
     assert render_size_for((84, 84), available) == (84, 84)
@@ -444,7 +444,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
     # the demonstrated one than the untrained network's (in normalised units, where the action
     # box is [-1, 1] and an untrained sampler lands anywhere in it).
     _write_demos(tmp_path / "demos", lengths=(40,))
-    from mani_skill_softvt.baselines.model import noise_scheduler
+    from softvt_campaign.baselines.model import noise_scheduler
 
     cfg = make_config("vo-c", **{**TINY, "steps": 400, "checkpoint_every": 400, "lr": 1e-3, "warmup_steps": 10,
                                  "unet_dims": (64, 128), "unet_groups": 8, "batch_size": 8})
@@ -464,7 +464,7 @@ def test_diffusion_learns_the_demonstrated_chunk(tmp_path):
 def test_action_errors_measure_distance_rotation_angle_and_closure():
     from scipy.spatial.transform import Rotation
 
-    from mani_skill_softvt.studies.openloop import action_errors
+    from softvt_campaign.studies.openloop import action_errors
 
     target = np.r_[0.5, 0.0, 0.2, down_rotvec(0.3), 0.4][None]
     pred = target.copy()
@@ -484,8 +484,8 @@ def test_action_errors_measure_distance_rotation_angle_and_closure():
 
 
 def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tmp_path):
-    from mani_skill_softvt.studies.openloop import main as openloop_main
-    from mani_skill_softvt.studies.openloop import replan_indices
+    from softvt_campaign.studies.openloop import main as openloop_main
+    from softvt_campaign.studies.openloop import replan_indices
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     cfg = make_config("vo-c", **{**TINY, "heldout_per_task": 1})
@@ -493,7 +493,7 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
     held = load_windows(cfg, tmp_path / "demos", None, heldout=True)
     assert (train.episodes, len(train), held.episodes, len(held)) == (2, 15, 1, 7)
     assert list(replan_indices(held, 8)) == [0] and list(replan_indices(train, 8)) == [0, 8, 9]
-    from mani_skill_softvt.baselines.dataset import split_episodes
+    from softvt_campaign.baselines.dataset import split_episodes
 
     names = [f"traj_{i}" for i in range(40)]
     fixed = make_config("vo-c", demos_per_task=30, heldout_per_task=5)
@@ -509,7 +509,7 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
     with pytest.raises(SystemExit):
         openloop_main([str(untouched), "--demos", str(tmp_path / "demos")])
     # The prepared data's key names the episodes read: the set grew, the key stays (a run resumes).
-    from mani_skill_softvt.baselines.dataset import _sources, cache_key
+    from softvt_campaign.baselines.dataset import _sources, cache_key
 
     small = make_config("vo-c", **{**TINY, "demos_per_task": 1, "heldout_per_task": 1})
     before = cache_key(small, _sources(small, tmp_path / "demos"))
@@ -521,7 +521,7 @@ def test_heldout_demos_are_never_trained_on_and_the_openloop_check_reads_them(tm
 
 
 def test_the_recipe_search_logs_each_snapshots_openloop_error_once_and_resumes(tmp_path, monkeypatch, capsys):
-    from mani_skill_softvt.studies import recipe_search as search
+    from softvt_campaign.studies import recipe_search as search
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
@@ -689,7 +689,7 @@ def test_a_twins_touch_rendered_from_states_without_its_contact_wrenches_is_refu
 
 
 def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):
-    from mani_skill_softvt import evaluate
+    from mani_skill_softvt.cli import evaluate
 
     _write_demos(tmp_path / "demos")
     path = T.train(make_config("vt-b", **TINY), tmp_path / "demos", tmp_path / "vt-b-tiny", progress=False)
@@ -701,7 +701,7 @@ def test_evaluate_takes_the_modes_a_baseline_was_trained_for(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_the_recipe_search_scores_snapshots_in_closed_loop_and_resumes(tmp_path, monkeypatch):
-    from mani_skill_softvt.studies import recipe_search as search
+    from softvt_campaign.studies import recipe_search as search
 
     _write_demos(tmp_path / "demos", lengths=(9, 6, 7))
     monkeypatch.setitem(search.RECIPES, "tiny", {k: v for k, v in TINY.items() if k != "threads"})
@@ -731,7 +731,7 @@ def test_the_recipe_search_scores_snapshots_in_closed_loop_and_resumes(tmp_path,
 @pytest.mark.slow
 def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
     # End to end on the real env: the record names the variant and the modes it was resolved to.
-    from mani_skill_softvt import evaluate
+    from mani_skill_softvt.cli import evaluate
     from mani_skill_softvt.evaluation.records import read_records
 
     _write_demos(tmp_path / "demos")
@@ -747,7 +747,7 @@ def test_a_trained_baseline_runs_a_scored_episode(tmp_path):
 
 
 def test_results_table_puts_each_variant_beside_the_paper(tmp_path):
-    from mani_skill_softvt.studies import results as report
+    from softvt_campaign.studies import results as report
     from mani_skill_softvt.evaluation.records import record_hash
 
     def rec(variant, seed, success, r_max, policy="x.pt", sha="a" * 64):
@@ -799,7 +799,7 @@ def test_results_pair_a_soft_suite_with_its_rigid_twin_on_the_shared_seeds(tmp_p
     # The paper's rigid-twin comparison: each variant trained on each suite, paired on the seeds
     # both suites draw (evaluation.protocols.seed_key); never across variants.
     from mani_skill_softvt.evaluation.records import record_hash
-    from mani_skill_softvt.studies import results as report
+    from softvt_campaign.studies import results as report
 
     def rec(suite, variant, seed, success):
         r = {"suite": suite, "task_id": 0, "condition": "id", "seed": seed, "success": success, "dsr_success": success,
@@ -823,8 +823,8 @@ def test_results_pair_a_soft_suite_with_its_rigid_twin_on_the_shared_seeds(tmp_p
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):
-    from mani_skill_softvt.baselines import export as E
-    from mani_skill_softvt.baselines.model import DiffusionPolicyModel
+    from softvt_campaign.baselines import export as E
+    from softvt_campaign.baselines.model import DiffusionPolicyModel
 
     _write_demos(tmp_path / "demos")
     cfg = make_config("vt-c", **TINY)
@@ -867,7 +867,7 @@ def test_train_command_line_applies_recipes_to_the_cpu_preset_only(tmp_path):
 
 def test_inference_fields_do_not_change_training(tmp_path):
     # What the recipe search relies on to derive exec4 from long without training it again.
-    from mani_skill_softvt.baselines.config import INFERENCE_FIELDS, training_identity
+    from softvt_campaign.baselines.config import INFERENCE_FIELDS, training_identity
 
     _write_demos(tmp_path / "demos")
     cfg = make_config("vo-c", **TINY)
@@ -880,7 +880,7 @@ def test_inference_fields_do_not_change_training(tmp_path):
 
 
 def test_closure_summary_tells_one_held_closure_from_a_ratchet():
-    from mani_skill_softvt.studies.closure import closure_summary, held_chunks
+    from softvt_campaign.studies.closure import closure_summary, held_chunks
 
     k = 8
     # The expert: one closure for the whole hold. The object is held from the closing chunk's
@@ -905,7 +905,7 @@ def test_closure_summary_tells_one_held_closure_from_a_ratchet():
 
 
 def test_closure_summary_names_the_closure_that_let_the_object_go():
-    from mani_skill_softvt.studies.closure import closure_summary
+    from softvt_campaign.studies.closure import closure_summary
 
     k = 8
     # Held over three chunks at 0.6, 0.8 and 0.6 (a policy switching between demos' closures), then
@@ -930,7 +930,7 @@ def test_closure_summary_names_the_closure_that_let_the_object_go():
 
 
 def test_closure_study_judges_records_as_evaluate_reproduce_and_names_the_stack():
-    from mani_skill_softvt.studies.closure import record_check
+    from softvt_campaign.studies.closure import record_check
 
     here = {"cpu": "Intel Xeon", "torch": "2.11.0"}
     assert record_check({1: [], 2: []}, [here, here], here)["records_failed"] is False
@@ -947,7 +947,7 @@ def test_closure_study_judges_records_as_evaluate_reproduce_and_names_the_stack(
 
 
 def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
-    from mani_skill_softvt.studies.closure import closure_readout
+    from softvt_campaign.studies.closure import closure_readout
 
     c = np.linspace(0.3, 0.9, 20)
     # Soft: the fingers go 18 mm further in over the closure range, and the pads press harder.
@@ -968,7 +968,7 @@ def test_closure_readout_tells_a_squeezable_object_from_a_rigid_one():
 
 
 def test_demo_closures_reads_each_demos_held_closure_and_width(tmp_path):
-    from mani_skill_softvt.studies.closure import demo_closures
+    from softvt_campaign.studies.closure import demo_closures
 
     ds = DemoSet(tmp_path, "object_rigid")
     ds.dir.mkdir(parents=True)
@@ -1004,7 +1004,7 @@ def test_demo_closures_reads_each_demos_held_closure_and_width(tmp_path):
     (["{committed}", "{committed}"], "two policies are named"),
 ])
 def test_closure_refuses_bad_input_before_running_anything(tmp_path, capsys, args, message):
-    from mani_skill_softvt.studies import closure
+    from softvt_campaign.studies import closure
 
     policy = tmp_path / "p.pt"
     policy.write_bytes(b"")  # never read: the range checks come before the policy file is needed

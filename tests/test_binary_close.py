@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from mani_skill_softvt.studies import binary_close as B
+from softvt_campaign.studies import binary_close as B
 
 
 def _log(root, suite, task, lines, control_mode="pd_ee_pose_binary"):

@@ -138,7 +138,7 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
         out.write_text("\n".join([lines[0], bad, *lines[2:]]) + "\n")
         with pytest.raises(error, match=where):
             evaluate(RunConfig.resolve(SPEC), out, eps)
-        from mani_skill_softvt.evaluate import main
+        from mani_skill_softvt.cli.evaluate import main
 
         # The command says it in one line naming the file, the line and what to do, not a traceback.
         with pytest.raises(SystemExit, match=where) as exit_:

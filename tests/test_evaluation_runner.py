@@ -48,7 +48,7 @@ def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube
 def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, soft_cube_expert_run, capsys):
     # The expert's episode run again gives the stored record bit for bit (all but the wall time);
     # a stored record that says another R_max (resealed, so it passes the audit) is named by field.
-    from mani_skill_softvt import evaluate as evaluate_cli
+    from mani_skill_softvt.cli import evaluate as evaluate_cli
 
     _, full, _ = soft_cube_expert_run
     # Its receipt also names another torch: the stack is reported as the reason, not as a difference.

@@ -7,7 +7,7 @@ import pytest
 
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.records import record_hash
-from mani_skill_softvt.studies import findings as F
+from softvt_campaign.studies import findings as F
 
 
 def _rec(i, success, r_max, policy="vo-c-cpu", variant="vo-c,cpu", suite="object_soft"):

@@ -10,27 +10,38 @@ from pathlib import Path
 import pytest
 
 import mani_skill_softvt
+import softvt_campaign
 
 PACKAGE = Path(mani_skill_softvt.__file__).parent
+# The campaign's distribution (campaign/): the baselines and the studies, above the library.
+CAMPAIGN = Path(softvt_campaign.__file__).parent
+
+
+def _root(path: Path) -> Path:
+    """The folder holding ``path``'s top-level package."""
+    return CAMPAIGN.parent if path.is_relative_to(CAMPAIGN) else PACKAGE.parent
 
 
 def _module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    parts = path.relative_to(_root(path)).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
 MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+CAMPAIGN_MODULES = {_module_name(p): p for p in CAMPAIGN.rglob("*.py")}
 # Old module paths kept for one release as thin re-exports of where their code moved (each says
 # where): they are not part of the layering, and go with the next release.
 ALIASES = {"mani_skill_softvt.motionplanning", "mani_skill_softvt.replay", "mani_skill_softvt.serve",
-           "mani_skill_softvt.evaluation.maniskill_dp"}
+           "mani_skill_softvt.evaluation.maniskill_dp", "mani_skill_softvt.baselines", "mani_skill_softvt.studies",
+           "mani_skill_softvt.evaluate", "mani_skill_softvt.compare", "mani_skill_softvt.gallery",
+           "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo"}
 
 
 def imported_modules(path: Path) -> set[str]:
     """Every module ``path`` imports, anywhere in the file (lazy imports included), as absolute
     names (``mani_skill_softvt.physics.fem``, ``warp``). ``from . import x`` imports the module
     ``x``, not its package's ``__init__``."""
-    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    rel = path.relative_to(_root(path)).with_suffix("")
     package = list(rel.parts[:-1])
     out = set()
     for node in ast.walk(ast.parse(path.read_text())):
@@ -40,7 +51,7 @@ def imported_modules(path: Path) -> set[str]:
             base = package[:len(package) - node.level + 1] if node.level else []
             mod = ".".join(base + ([node.module] if node.module else []))
             names = {f"{mod}.{a.name}" for a in node.names}
-            out |= names if node.module is None and names <= set(MODULES) else {mod} | names
+            out |= names if node.module is None and names <= set(MODULES) | set(CAMPAIGN_MODULES) else {mod} | names
     return out
 
 
@@ -73,8 +84,9 @@ def test_the_action_contract_needs_no_simulator():
     assert imports_any(PACKAGE / "actions.py", ("mani_skill_softvt",)) == ["mani_skill_softvt.physics.transforms",
                                                                           "mani_skill_softvt.physics.transforms.down_rotvec",
                                                                           "mani_skill_softvt.physics.transforms.quat_to_rotvec"]
-    for consumer in ("evaluation/policies.py", "baselines/features.py", "integrations/openpi/remote.py"):
-        assert "mani_skill_softvt.tasks.robot" not in imported_modules(PACKAGE / consumer), consumer
+    for consumer in (PACKAGE / "evaluation/policies.py", CAMPAIGN / "baselines/features.py",
+                     PACKAGE / "integrations/openpi/remote.py"):
+        assert "mani_skill_softvt.tasks.robot" not in imported_modules(consumer), consumer
 
 
 @pytest.mark.parametrize("module", ["rollout.py", "integrations/lerobot/env.py", "expert/grasp_script.py"])
@@ -91,27 +103,28 @@ def test_the_policy_contract_imports_nothing_of_the_package():
 def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
     assert not (PACKAGE / "assets/gallery.py").exists() and not (PACKAGE / "tactile/gallery.py").exists()
     for path in (PACKAGE / "assets").glob("*.py"):
-        assert imports_any(path, ("mani_skill_softvt.gallery",)) == [], path
+        assert imports_any(path, ("mani_skill_softvt.cli.gallery", "mani_skill_softvt.gallery")) == [], path
 
 
 # Observation keys are spelled in the contract (mani_skill_softvt/observations.py) and nowhere a
 # consumer reads them.
-CONSUMERS = ["integrations/openpi/remote.py", "integrations/openpi/serve.py", "baselines/features.py",
-             "baselines/dataset.py", "integrations/lerobot/export.py",
-             "evaluation/videos.py", "demos.py", "evaluation/policies.py", "baselines/agent.py"]
+CONSUMERS = [PACKAGE / m for m in ("integrations/openpi/remote.py", "integrations/openpi/serve.py",
+                                    "integrations/lerobot/export.py", "evaluation/videos.py", "demos.py",
+                                    "evaluation/policies.py")] + \
+            [CAMPAIGN / m for m in ("baselines/features.py", "baselines/dataset.py", "baselines/agent.py")]
 KEY_SPELLINGS = ('"agent/qpos"', '"extra/tcp_pose"', "sensor_data/", '"tactile/', "tactile/{", '"base_camera"',
                  '"hand_camera"', '"marker_initial"', '["agent"]', '["extra"]', '["sensor_data"]')
 
 
-@pytest.mark.parametrize("module", CONSUMERS)
+@pytest.mark.parametrize("module", CONSUMERS, ids=lambda p: _module_name(p))
 def test_consumers_take_observation_keys_from_the_contract(module):
-    source = (PACKAGE / module).read_text()
+    source = module.read_text()
     assert [k for k in KEY_SPELLINGS if k in source] == []
-    assert "mani_skill_softvt.observations" in imported_modules(PACKAGE / module)
+    assert "mani_skill_softvt.observations" in imported_modules(module)
 
 
 def test_one_flattener_and_one_info_reader():
-    for path in PACKAGE.rglob("*.py"):
+    for path in [*PACKAGE.rglob("*.py"), *CAMPAIGN.rglob("*.py")]:
         if path.name == "observations.py":
             continue
         tree = ast.parse(path.read_text())
@@ -125,8 +138,8 @@ def test_one_episode_loop():
     step on, the LeRobot env passing on a step of LeRobot's own loop (lerobot-eval), ManiSkill's
     action converters' signature (replay.py) and the kernel warm-up."""
     stepping = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "env.step(" in p.read_text())
-    assert stepping == ["evaluation/wrapper.py", "integrations/lerobot/env.py", "integrations/maniskill/replay.py",
-                        "rollout.py", "warmup.py"]
+    assert stepping == ["cli/warmup.py", "evaluation/wrapper.py", "integrations/lerobot/env.py", "integrations/maniskill/replay.py",
+                        "rollout.py"]
 
 
 def test_data_keeps_file_formats_and_does_not_plan():
@@ -210,11 +223,29 @@ def test_the_core_library_imports_no_integration():
             assert not [d for d in deps if d.startswith("mani_skill_softvt.integrations")], name
 
 
-def test_the_evaluation_never_imports_the_baselines():
-    """Policies load through the evaluation's door (evaluation/policies.py); the baselines register
-    their policy files there as an entry point, so the dependency points one way."""
-    graph = _module_graph()
-    for name, deps in graph.items():
-        if name.startswith("mani_skill_softvt.evaluation"):
-            assert not [d for d in deps if d.startswith("mani_skill_softvt.baselines")], name
-    assert "mani_skill_softvt.baselines.train" not in graph["mani_skill_softvt.baselines.agent"]
+def test_the_commands_sit_on_top():
+    """cli/ holds the commands (argument parsing and output); no library module imports one."""
+    for name, path in MODULES.items():
+        if name not in ALIASES and not name.startswith("mani_skill_softvt.cli"):
+            assert imports_any(path, ("mani_skill_softvt.cli",)) == [], name
+
+
+def test_the_library_never_imports_the_campaign():
+    """The campaign (campaign/: the baselines and the studies) sits above the library as its own
+    distribution: policies load through the evaluation's door (evaluation/policies.py), where the
+    baselines register their policy files as an entry point, so the dependency points one way. Only
+    the one-release aliases of the old paths name it."""
+    for name, path in MODULES.items():
+        if name not in ALIASES:
+            assert imports_any(path, ("softvt_campaign",)) == [], name
+    agent = imported_modules(CAMPAIGN / "baselines/agent.py")
+    assert "softvt_campaign.baselines.train" not in agent  # evaluating a policy needs no trainer
+
+
+def test_the_campaign_has_no_cycle_and_reaches_the_library_only_through_its_public_modules():
+    graph = {name: {m for m in imported_modules(path) if m in CAMPAIGN_MODULES and m not in (name, "softvt_campaign")}
+             for name, path in CAMPAIGN_MODULES.items()}
+    assert _cycles(graph) == []
+    for name, path in CAMPAIGN_MODULES.items():
+        assert not [m for m in imported_modules(path) if m.startswith("mani_skill_softvt") and
+                    any(part.startswith("_") and not part.startswith("__") for part in m.split("."))], name

@@ -15,6 +15,7 @@ import pytest
 from mani_skill_softvt import fingerprints as F
 from mani_skill_softvt import numerics as N
 from mani_skill_softvt.parallel import run_tasks
+from softvt_campaign import fingerprints as DP
 
 GOLDEN = json.loads((Path(__file__).parent / "golden" / "fingerprints.json").read_text())
 
@@ -110,11 +111,11 @@ def test_the_tactile_frame_is_the_golden_one():
 
 
 def test_a_committed_policys_action_chunk_is_the_golden_one():
-    _same("dp_inference", F.dp_inference())
+    _same("dp_inference", DP.dp_inference())
 
 
 def test_training_a_small_diffusion_policy_gives_the_golden_weights():
-    got = F.dp_training()
+    got = DP.dp_training()
     _same("dp_training", got, ("losses", "weights", "episode"))
 
 

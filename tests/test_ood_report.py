@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from mani_skill_softvt.studies import ood_results as O
+from softvt_campaign.studies import ood_results as O
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.records import record_hash
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS

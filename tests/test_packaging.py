@@ -60,6 +60,27 @@ def test_wheel_ships_the_committed_assets_and_calibration_cards(wheel):
                                 f"{sorted(modules - names)}"
 
 
+def test_the_campaign_is_its_own_distribution_and_the_library_wheel_ships_none_of_it(wheel, tmp_path):
+    """The baselines and the studies (campaign/) are a sibling distribution, as ManiSkill keeps its
+    baselines in examples/: its wheel carries every campaign module and registers the baselines'
+    policy kind; the library's wheel carries only the one-release aliases of their old paths."""
+    src = tmp_path / "campaign"
+    shutil.copytree(REPO_DIR / "campaign", src, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "build"))
+    run = subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation",
+                          "-w", str(tmp_path), "-q"], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    (campaign_wheel,) = tmp_path.glob("softvt_campaign-*.whl")
+    names = set(zipfile.ZipFile(campaign_wheel).namelist())
+    modules = {p.relative_to(REPO_DIR / "campaign").as_posix() for p in (REPO_DIR / "campaign").rglob("*.py")}
+    assert modules and not modules - names, sorted(modules - names)
+    (entry_points,) = [n for n in names if n.endswith("entry_points.txt")]
+    assert "diffusion_policy = softvt_campaign.baselines.agent:POLICY_FILES" in \
+        zipfile.ZipFile(campaign_wheel).read(entry_points).decode()
+    library = {n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".py")}
+    assert {n for n in library if "/baselines/" in n or "/studies/" in n} == \
+        {"mani_skill_softvt/baselines/__init__.py", "mani_skill_softvt/studies/__init__.py"}
+
+
 def test_installed_wheel_finds_its_assets_and_cards(wheel, tmp_path):
     site = tmp_path / "site"
     run = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-index", "--target", str(site),

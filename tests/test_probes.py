@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from mani_skill_softvt.studies.touch_probes import (
+from softvt_campaign.studies.touch_probes import (
     RidgeSolver,
     balanced_accuracy,
     r2,

@@ -5,7 +5,7 @@ import json
 from mani_skill_softvt import numerics as N
 from mani_skill_softvt.evaluation import provenance as P
 from mani_skill_softvt.paths import REPO_DIR
-from mani_skill_softvt.studies.results import provenance_lines
+from softvt_campaign.studies.results import provenance_lines
 
 EPYC = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
 

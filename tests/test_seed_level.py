@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mani_skill_softvt import compare as cli
+from mani_skill_softvt.cli import compare as cli
 from mani_skill_softvt.evaluation import seed_level as S
 from mani_skill_softvt.evaluation.records import seal
-from mani_skill_softvt.studies import rule_check
+from softvt_campaign.studies import rule_check
 
 
 def test_pooled_variance_is_the_within_recipe_variance_with_its_degrees_of_freedom():
@@ -127,7 +127,7 @@ def test_the_command_compares_seed_files_and_refuses_an_edited_one_in_one_line(t
 
 
 def test_seed_findings_score_each_seed_on_the_registered_subset_and_pool_the_family():
-    from mani_skill_softvt.studies import seed_findings as SF
+    from softvt_campaign.studies import seed_findings as SF
 
     def run(p, seed, rng):  # a complete ID run of one seed: 50 episodes a task, success with probability p
         return [{"suite": "object_soft", "task_id": t, "condition": "id", "seed": 50_000_000 + 1000 * t + i,

@@ -1,4 +1,4 @@
-"""The twin-pinch study (mani_skill_softvt/studies/twin_pinch.py): its maths without a simulator, and
+"""The twin-pinch study (campaign/softvt_campaign/studies/twin_pinch.py): its maths without a simulator, and
 one grasp of the cube twin (slow)."""
 
 import gymnasium as gym
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mani_skill_softvt.studies.twin_pinch import (PAD_LENGTH, PAD_WIDTH, VIEW_HEIGHT, convex_gap, flat_face_patch,
+from softvt_campaign.studies.twin_pinch import (PAD_LENGTH, PAD_WIDTH, VIEW_HEIGHT, convex_gap, flat_face_patch,
                                                   nearest_face_tilt, run_grasp, turn_in_hand_deg, winkler_patch)
 from mani_skill_softvt.tactile import constants as TC
 from mani_skill_softvt.tactile.gel import foundation_stiffness

@@ -1,10 +1,12 @@
-"""The paper's Diffusion Policy baselines (appendix "Baseline Training Details").
+"""Moved to :mod:`softvt_campaign.baselines`, the campaign's distribution beside the library (``campaign/``,
+``pip install -e campaign``; ``scripts/setup.sh`` installs it). This package is an alias for one
+release: its module path is the campaign's folder, so ``python -m mani_skill_softvt.baselines.<module>``
+and imports from it keep working (a module imported by both paths is loaded twice: use the new one)."""
 
-- :mod:`.config`: ``DPConfig``, the variants (vo-c, vt-c, vo-b, vt-b) and the ``paper`` / ``cpu`` presets;
-- :mod:`.features`: what the policy sees of a step (pure functions, shared by training and evaluation);
-- :mod:`.networks`: image encoders and the conditional 1-D U-Net;
-- :mod:`.model`: the diffusion model (normalisers, loss, sampling);
-- :mod:`.dataset`: training windows from rendered demonstrations;
-- :mod:`.train`: ``python -m mani_skill_softvt.baselines.train`` (progress, checkpoints, resume);
-- :mod:`.agent`: a trained ``policy.pt`` as an evaluation policy (``evaluate --policy <policy.pt>``).
-"""
+try:
+    import softvt_campaign.baselines as _moved
+except ImportError as err:  # the library alone: say where the code went
+    raise ImportError("mani_skill_softvt.baselines moved to softvt_campaign.baselines, the campaign's distribution: install "
+                      "it with 'pip install -e campaign' from the repository root (scripts/setup.sh does)") from err
+
+__path__ = list(_moved.__path__)

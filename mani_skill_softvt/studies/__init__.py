@@ -1,16 +1,12 @@
-"""The campaign's studies of the baselines, each named for what it shows (docs/baselines.md).
+"""Moved to :mod:`softvt_campaign.studies`, the campaign's distribution beside the library (``campaign/``,
+``pip install -e campaign``; ``scripts/setup.sh`` installs it). This package is an alias for one
+release: its module path is the campaign's folder, so ``python -m mani_skill_softvt.studies.<module>``
+and imports from it keep working (a module imported by both paths is loaded twice: use the new one)."""
 
-The library a user imports to train and run a baseline is :mod:`mani_skill_softvt.baselines`;
-these read its policies, records and demos and write the campaign's reports:
+try:
+    import softvt_campaign.studies as _moved
+except ImportError as err:  # the library alone: say where the code went
+    raise ImportError("mani_skill_softvt.studies moved to softvt_campaign.studies, the campaign's distribution: install "
+                      "it with 'pip install -e campaign' from the repository root (scripts/setup.sh does)") from err
 
-- :mod:`.results`: the variants' ID results beside the paper's, paired comparisons, success traces;
-- :mod:`.ood_results`: the OOD protocol's results beside the paper's (pooled, per condition, stiffness);
-- :mod:`.closure`: a policy's commanded gripper closure over its episodes, beside the expert's draw;
-- :mod:`.touch_probes`: what the tactile and camera streams carry of force and deformation (linear probes);
-- :mod:`.recipe_search`: the training recipes ranked by open-loop error, then closed loop;
-- :mod:`.openloop`: a trained policy's held-out open-loop action error;
-- :mod:`.twin_pinch`: how rigid twins sit in the scripted pinch and what the tactile model shows of it;
-- :mod:`.binary_close`: what a binary close (against the force limit) does to each object against its tolerance;
-- :mod:`.findings`: the paper's four findings tested on the Object suites, each marked supported,
-  contradicted or unresolved.
-"""
+__path__ = list(_moved.__path__)

@@ -1,7 +1,7 @@
 """SoftGraspLift-v1: grasp a soft object from the table, lift it and hold it.
 
 The foundation scene (no target container): the physics every suite builds on, used by the
-grasp demo (``python -m mani_skill_softvt.grasp_demo``), the coupling tests and the speed benchmark.
+grasp demo (``python -m mani_skill_softvt.cli.grasp_demo``), the coupling tests and the speed benchmark.
 
 **Task Description:** pick up the object lying on the table (by default the soft cream-colored
 cube; any asset id or rigid twin via ``asset_id=...``) and hold it 10 cm above the table.

@@ -1,7 +1,7 @@
 """How a rigid twin sits in the scripted pinch, and what the tactile model shows of it.
 
-    python -m mani_skill_softvt.studies.twin_pinch            # the cube twin: 4 closures x 4 seeds x 2 yaws
-    python -m mani_skill_softvt.studies.twin_pinch --pivot    # pastry003's and pastry005's twins, lightest closures
+    python -m softvt_campaign.studies.twin_pinch            # the cube twin: 4 closures x 4 seeds x 2 yaws
+    python -m softvt_campaign.studies.twin_pinch --pivot    # pastry003's and pastry005's twins, lightest closures
 
 Each grasp is the calibration's grasp, lift and hold (``calibration.protocol.STEPS``) on
 ``SoftGraspLift-v1`` with the hand at its default heading (yaw ``0``) or turned to the object's
@@ -38,21 +38,21 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
-from .. import tasks  # noqa: F401  (registers SoftGraspLift-v1)
-from ..calibration import protocol as P
-from ..calibration.stats import slip_distance
-from ..expert.grasp_script import GraspPlan, run_grasp_script
-from ..fileio import atomic_write, atomic_write_json, read_json
-from ..observations import SIDES
-from ..paths import REPO_DIR
-from ..physics.constants import physics_signature, signature_mismatch
-from ..physics.rigid import rigid_nodes
-from ..physics.transforms import pose_wxyz_to_matrix, quat_wxyz_to_matrix, yaw_between
-from ..tactile import constants as TC
-from ..tactile.gel import foundation_stiffness
-from ..tactile.sensor import world_to_pad
-from ..tasks.constants import GEL_PAD_HALF_EXTENTS
-from ..tasks.suites import SUITES
+from mani_skill_softvt import tasks  # noqa: F401  (registers SoftGraspLift-v1)
+from mani_skill_softvt.calibration import protocol as P
+from mani_skill_softvt.calibration.stats import slip_distance
+from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
+from mani_skill_softvt.fileio import atomic_write, atomic_write_json, read_json
+from mani_skill_softvt.observations import SIDES
+from mani_skill_softvt.paths import REPO_DIR
+from mani_skill_softvt.physics.constants import physics_signature, signature_mismatch
+from mani_skill_softvt.physics.rigid import rigid_nodes
+from mani_skill_softvt.physics.transforms import pose_wxyz_to_matrix, quat_wxyz_to_matrix, yaw_between
+from mani_skill_softvt.tactile import constants as TC
+from mani_skill_softvt.tactile.gel import foundation_stiffness
+from mani_skill_softvt.tactile.sensor import world_to_pad
+from mani_skill_softvt.tasks.constants import GEL_PAD_HALF_EXTENTS
+from mani_skill_softvt.tasks.suites import SUITES
 
 TACTILE_MODEL = SUITES["object_rigid"].tactile_model  # the version of the twins' frames
 HOLD_STEP = 10  # index in the hold (from 0): lifted and at rest in the grasp
@@ -259,7 +259,7 @@ def write(result: dict, path: Path) -> None:
 
 
 def main(argv=None) -> list[dict]:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.twin_pinch", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.twin_pinch", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--assets", nargs="+", default=None, help=f"twin asset ids (default {list(CUBE)})")
     ap.add_argument("--closures", nargs="+", type=float, default=None, help=f"default {CUBE['rigid_stw_cube_hq']}")

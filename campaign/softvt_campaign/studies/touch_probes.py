@@ -2,7 +2,7 @@
 force, the deformation ratio R_t and slip from the tactile stream alone, the wrist camera alone,
 and both, scored on held-out demos.
 
-    python -m mani_skill_softvt.studies.touch_probes --demos /root/softvt-demos --camera-size 84x84
+    python -m softvt_campaign.studies.touch_probes --demos /root/softvt-demos --camera-size 84x84
 
 Per frame of a demo (the observation after each step):
 
@@ -31,13 +31,13 @@ import numpy as np
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from ..data.demo_set import DemoSet
-from ..data.images import resize_image
-from ..data.trajectory import episode_digest, open_h5, rendering_current
-from ..fileio import atomic_write, atomic_write_json
-from ..observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
-from ..paths import DEMOS_DIR, REPO_DIR
-from ..tasks.suites import NUM_TASKS, get_suite
+from mani_skill_softvt.data.demo_set import DemoSet
+from mani_skill_softvt.data.images import resize_image
+from mani_skill_softvt.data.trajectory import episode_digest, open_h5, rendering_current
+from mani_skill_softvt.fileio import atomic_write, atomic_write_json
+from mani_skill_softvt.observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
+from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
+from mani_skill_softvt.tasks.suites import NUM_TASKS, get_suite
 
 SLIP_SPEED = 1e-3  # m/s: an object moving 0.05 mm per 50-ms step relative to the fingers slips
 CONTACT_FORCE = 0.05  # N on each pad: both pads press on the object
@@ -292,7 +292,7 @@ def plot_result(result: dict, path: Path) -> None:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.touch_probes", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.touch_probes", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR)
     ap.add_argument("--suite", default="object_soft")

@@ -1,9 +1,9 @@
 """Train a Diffusion Policy baseline on rendered expert demonstrations (resumable).
 
-    python -m mani_skill_softvt.baselines.train --variant vt-c                    # cpu preset, Object-Soft
-    python -m mani_skill_softvt.baselines.train --variant vo-c --config paper     # the appendix's recipe (GPU)
-    python -m mani_skill_softvt.baselines.train --variant vo-b --set steps=500 batch_size=16
-    python -m mani_skill_softvt.baselines.train --variant vo-c --recipe long --budget-min 150 --cache /data/cache
+    python -m softvt_campaign.baselines.train --variant vt-c                    # cpu preset, Object-Soft
+    python -m softvt_campaign.baselines.train --variant vo-c --config paper     # the appendix's recipe (GPU)
+    python -m softvt_campaign.baselines.train --variant vo-b --set steps=500 batch_size=16
+    python -m softvt_campaign.baselines.train --variant vo-c --recipe long --budget-min 150 --cache /data/cache
 
 Needs the suite's demos generated and rendered with ``--obs-mode rgb+tactile`` (docs/baselines.md).
 ``--recipe`` applies one of the named recipes (:data:`~.config.RECIPES`) before ``--set``;
@@ -34,11 +34,11 @@ from diffusers.training_utils import EMAModel
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from ..fileio import atomic_write
-from ..numerics import chosen as chosen_numerics
-from ..numerics import release, resolved
-from ..paths import DEMOS_DIR, REPO_DIR
-from ..tasks.suites import get_suite
+from mani_skill_softvt.fileio import atomic_write
+from mani_skill_softvt.numerics import chosen as chosen_numerics
+from mani_skill_softvt.numerics import release, resolved
+from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
+from mani_skill_softvt.tasks.suites import get_suite
 from .config import (
     PRESETS,
     RECIPES,

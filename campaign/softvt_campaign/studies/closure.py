@@ -1,8 +1,8 @@
 """How trained policies close the gripper over an episode, beside the expert's closure for the same seed.
 
-    python -m mani_skill_softvt.studies.closure baselines/policies/vo-c-cpu.pt \
+    python -m softvt_campaign.studies.closure baselines/policies/vo-c-cpu.pt \
         baselines/policies/vt-c-cpu.pt --task 3 --episodes 6 --out baselines/results
-    python -m mani_skill_softvt.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
+    python -m softvt_campaign.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
         --suite object_rigid --task 7 --episodes 10 --demos $SOFTVT_DEMOS_DIR --out baselines/results
 
 The scripted expert draws one closure per episode, uniform in the object's calibrated envelope
@@ -40,21 +40,21 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from ..baselines.agent import GRIPPER
-from ..data.demo_set import DemoSet
-from ..data.seeds import ID_EPISODES_PER_TASK
-from ..data.trajectory import open_h5
-from ..evaluation.protocols import episode_key
-from ..evaluation.report import rt_series
-from ..evaluation.run import RunConfig, policy_tag
-from ..evaluation.runner import record_differences, run_episode, run_records
-from ..evaluation.wrapper import make_env
-from ..expert.pick_place import draw_closure
-from ..fileio import atomic_write, atomic_write_json
-from ..parallel import run_tasks
-from ..physics.constants import CONTROL_FREQ
-from ..rollout import EvaluatorTrace, Observer
-from ..stack import software_stack, stack_differences
-from ..tasks.suites import NUM_TASKS, SUITES
+from mani_skill_softvt.data.demo_set import DemoSet
+from mani_skill_softvt.data.seeds import ID_EPISODES_PER_TASK
+from mani_skill_softvt.data.trajectory import open_h5
+from mani_skill_softvt.evaluation.protocols import episode_key
+from mani_skill_softvt.evaluation.report import rt_series
+from mani_skill_softvt.evaluation.run import RunConfig, policy_tag
+from mani_skill_softvt.evaluation.runner import record_differences, run_episode, run_records
+from mani_skill_softvt.evaluation.wrapper import make_env
+from mani_skill_softvt.expert.pick_place import draw_closure
+from mani_skill_softvt.fileio import atomic_write, atomic_write_json
+from mani_skill_softvt.parallel import run_tasks
+from mani_skill_softvt.physics.constants import CONTROL_FREQ
+from mani_skill_softvt.rollout import EvaluatorTrace, Observer
+from mani_skill_softvt.stack import software_stack, stack_differences
+from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES
 
 
 OUTCOME_FIELDS = ("termination", "success", "dsr_success")  # what an episode keeps on another machine
@@ -132,7 +132,7 @@ def demo_closures(demos: DemoSet, task: int) -> tuple[np.ndarray, np.ndarray, np
     """Each accepted demo's closure (the expert's draw, the trajectory's ``closure`` attribute, which
     it commands for the whole hold), its held jaw width (median, m) and the weaker pad's held force
     (median, N), from the trajectory file alone. The width is the policy's (the finger joints' sum,
-    :func:`~mani_skill_softvt.baselines.features.frame_features`), read from the robot's recorded
+    :func:`~softvt_campaign.baselines.features.frame_features`), read from the robot's recorded
     state, one row per step after the reset's."""
     path = demos.trajectory(task)
     closures, widths, grips = [], [], []

@@ -1,7 +1,7 @@
 """What a binary close does to each object against its tolerance (the findings campaign's step 4).
 
-    python -m mani_skill_softvt.studies.binary_close --demos /root/binary-close --seeds 10
-    python -m mani_skill_softvt.studies.binary_close --demos baselines/results/binary_close   # the committed run's logs
+    python -m softvt_campaign.studies.binary_close --demos /root/binary-close --seeds 10
+    python -m softvt_campaign.studies.binary_close --demos baselines/results/binary_close   # the committed run's logs
 
 A binary gripper action has two values: open, or close until the fingers stall against the 10 N
 force limit (``pd_ee_pose_binary``, as the release's binary action). The scripted expert runs
@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calibration.cards import load_calibration_card
-from ..calibration.stats import by_closure, stable_grasps
-from ..data.demo_set import DemoSet
-from ..fileio import read_json, write_page
-from ..tasks.suites import NUM_TASKS, SUITES, task_spec
+from mani_skill_softvt.calibration.cards import load_calibration_card
+from mani_skill_softvt.calibration.stats import by_closure, stable_grasps
+from mani_skill_softvt.data.demo_set import DemoSet
+from mani_skill_softvt.fileio import read_json, write_page
+from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES, task_spec
 
 # The screening's problems that concern the tolerance alone (data/trajectory.py: episode_problems);
 # any other (not successful, dropped, NaN, no plan) is a failed task.
@@ -136,7 +136,7 @@ def build(result: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.binary_close", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.binary_close", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--demos", type=Path, required=True, help="where the binary-gripper episodes go (a store of their own)")
     ap.add_argument("--suite", default="object_soft", choices=sorted(s for s, suite in SUITES.items() if not suite.rigid),
@@ -149,7 +149,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=Path("baselines/results"))
     args = ap.parse_args(argv)
     if args.seeds is not None:
-        from ..demos import generate  # the expert and its planner: only when generating
+        from mani_skill_softvt.demos import generate  # the expert and its planner: only when generating
         generate(args.suite, list(range(NUM_TASKS)), args.seeds, args.demos, workers=args.workers,
                  control_mode="pd_ee_pose_binary")
     try:

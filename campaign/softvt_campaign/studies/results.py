@@ -1,6 +1,6 @@
 """The baselines' results beside the paper's: TSR, DSR, TSR - DSR and its share of successes.
 
-    python -m mani_skill_softvt.studies.results baselines/results/object_soft_id_*.jsonl \
+    python -m softvt_campaign.studies.results baselines/results/object_soft_id_*.jsonl \
         --legacy baselines/results/old_physics/*.jsonl
 
 Reads evaluation records (each verified against its hash), groups them by the policy's name in
@@ -30,14 +30,14 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from ..evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
-from ..evaluation.protocols import episode_key, seed_key
-from ..evaluation.provenance import machine, numerics, sidecar
-from ..evaluation.records import read_records
-from ..evaluation.report import rt_series
-from ..evaluation.run import policy_tag
-from ..fileio import atomic_write, atomic_write_json
-from ..tasks.suites import get_suite, task_spec
+from mani_skill_softvt.evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
+from mani_skill_softvt.evaluation.protocols import episode_key, seed_key
+from mani_skill_softvt.evaluation.provenance import machine, numerics, sidecar
+from mani_skill_softvt.evaluation.records import read_records
+from mani_skill_softvt.evaluation.report import rt_series
+from mani_skill_softvt.evaluation.run import policy_tag
+from mani_skill_softvt.fileio import atomic_write, atomic_write_json
+from mani_skill_softvt.tasks.suites import get_suite, task_spec
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
 # variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
@@ -239,7 +239,7 @@ def provenance_lines(files: list[tuple[str, list[dict], dict | None]]) -> list[s
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.results", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.results", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("records", nargs="*", type=Path, help="evaluation record files (JSONL)")
     ap.add_argument("--legacy", nargs="*", type=Path, default=[],

@@ -1,6 +1,6 @@
 """Export a trained baseline for the repository: its weights in float16, at most 20 MiB.
 
-    python -m mani_skill_softvt.baselines.export RUN/policy.pt baselines/policies/vo-c-cpu.pt --if-changed
+    python -m softvt_campaign.baselines.export RUN/policy.pt baselines/policies/vo-c-cpu.pt --if-changed
 
 The exported file is a ``policy.pt`` like the one training writes (``evaluate --policy`` loads
 it, and the evaluator names its records after the file: ``object_soft_id_vo-c-cpu``), with the
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import torch
 
-from ..fileio import file_sha256
-from ..fileio import atomic_write
+from mani_skill_softvt.fileio import file_sha256
+from mani_skill_softvt.fileio import atomic_write
 from .agent import read_policy_file
 from .model import load_checkpoint
 
@@ -62,7 +62,7 @@ def export(source: Path, dest: Path, max_mib: float = MAX_MIB, if_changed: bool 
 
 
 def main(argv=None) -> Path:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.baselines.export", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.baselines.export", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("source", type=Path, help="a policy.pt (or snapshot) written by training")
     ap.add_argument("dest", type=Path, help="the exported file, e.g. baselines/policies/vo-c-cpu.pt")

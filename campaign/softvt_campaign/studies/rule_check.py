@@ -1,6 +1,6 @@
 """The pre-registered rule checked on synthetic records with known effects (docs/preregistration.md).
 
-    python -m mani_skill_softvt.studies.rule_check [--reps 2000] [--sd 8.6]
+    python -m softvt_campaign.studies.rule_check [--reps 2000] [--sd 8.6]
 
 Two recipes, A and B, are trained ``n`` times each; B's true score is A's plus ``effect`` points.
 A training seed's true score scatters about its recipe's by the seed-to-seed standard deviation
@@ -20,7 +20,7 @@ import argparse
 import numpy as np
 from scipy import stats
 
-from ..evaluation.seed_level import (CONTRADICTED, EQUIVALENT, SUPPORTED, UNRESOLVED, compare_seeds,
+from mani_skill_softvt.evaluation.seed_level import (CONTRADICTED, EQUIVALENT, SUPPORTED, UNRESOLVED, compare_seeds,
                                      minimum_detectable, pooled_variance, seeds_needed, verdict)
 
 EPISODES = 500

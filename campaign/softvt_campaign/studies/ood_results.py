@@ -1,6 +1,6 @@
 """The OOD protocol's results beside the paper's (Finding 4): pooled, per condition, under stiffness shift.
 
-    python -m mani_skill_softvt.studies.ood_results baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
+    python -m softvt_campaign.studies.ood_results baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
         baselines/results/object_soft_ood_vt-c-cpu.jsonl --out baselines/results
 
 Each OOD records file is read with its policy's ID records (the same directory's
@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..evaluation.metrics import paired_comparison, percent, percent_ci, summarize
-from ..evaluation.records import read_records
-from ..evaluation.runner import single_run
-from ..fileio import atomic_write, atomic_write_json
-from ..tasks.suites import OOD_CONDITIONS, PhysicalFactors
+from mani_skill_softvt.evaluation.metrics import paired_comparison, percent, percent_ci, summarize
+from mani_skill_softvt.evaluation.records import read_records
+from mani_skill_softvt.evaluation.runner import single_run
+from mani_skill_softvt.fileio import atomic_write, atomic_write_json
+from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, PhysicalFactors
 from .results import variant_of
 
 # The paper's per-condition OOD table for Diffusion Policy on Object-Soft (TSR, DSR %; 100 episodes each),

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..evaluation.policies import PolicyKind, PolicySource
-from ..observations import flatten_batch, is_native_camera_size
-from ..policy import Policy
-from ..tasks.suites import get_suite
+from mani_skill_softvt.evaluation.policies import PolicyKind, PolicySource
+from mani_skill_softvt.observations import flatten_batch, is_native_camera_size
+from mani_skill_softvt.policy import Policy
+from mani_skill_softvt.tasks.suites import get_suite
 from .config import DPConfig
 from .features import frame_features
 from .model import DiffusionPolicyModel, noise_scheduler
@@ -38,7 +38,7 @@ def read_policy_file(path: Path, data: bytes | None = None) -> tuple[DPConfig, d
     if data is None:
         if not path.is_file():
             raise FileNotFoundError(f"policy checkpoint {path} does not exist; train one with "
-                                    "`python -m mani_skill_softvt.baselines.train --variant ...` (it writes policy.pt)")
+                                    "`python -m softvt_campaign.baselines.train --variant ...` (it writes policy.pt)")
         data = path.read_bytes()
     try:
         ckpt = load_checkpoint(data, path)

@@ -1,12 +1,12 @@
 """The recipe search of the CPU baselines (campaign step 2): named recipes, trained on the same
 demos with held-out demos set aside, ranked by their held-out open-loop error.
 
-    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes base long --budget-min 120
-    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes long --set batch_size=64
-    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --recipes long --closed-loop 10 --steps 6000 12000
-    python -m mani_skill_softvt.studies.recipe_search --variant vo-c --table       # the results so far
+    python -m softvt_campaign.studies.recipe_search --variant vo-c --recipes base long --budget-min 120
+    python -m softvt_campaign.studies.recipe_search --variant vo-c --recipes long --set batch_size=64
+    python -m softvt_campaign.studies.recipe_search --variant vo-c --recipes long --closed-loop 10 --steps 6000 12000
+    python -m softvt_campaign.studies.recipe_search --variant vo-c --table       # the results so far
 
-A recipe is a set of :class:`~mani_skill_softvt.baselines.config.DPConfig` overrides on the cpu
+A recipe is a set of :class:`~softvt_campaign.baselines.config.DPConfig` overrides on the cpu
 preset (:data:`~.config.RECIPES`), plus any ``--set key=value`` (the run is then named
 ``<variant>-<recipe>+key=value``), always with ``heldout_per_task`` = ``--heldout`` (demos of each task
 never trained on: those after ``--demos-per-task``, which stay the same as the set grows). Each run trains under ``--runs`` (outside the checkout: checkpoints and
@@ -42,13 +42,13 @@ from tqdm import tqdm
 from ..baselines.agent import read_policy_file, resolve_policy_file
 from ..baselines.config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
 from ..baselines.train import POLICY, save, snapshot_path, train
-from ..evaluation.metrics import percent_ci, summarize
-from ..evaluation.protocols import episode_key
-from ..evaluation.records import read_records
-from ..evaluation.run import RunConfig
-from ..evaluation.runner import evaluate
-from ..fileio import append_jsonl, atomic_write, read_jsonl
-from ..paths import DEMOS_DIR, REPO_DIR
+from mani_skill_softvt.evaluation.metrics import percent_ci, summarize
+from mani_skill_softvt.evaluation.protocols import episode_key
+from mani_skill_softvt.evaluation.records import read_records
+from mani_skill_softvt.evaluation.run import RunConfig
+from mani_skill_softvt.evaluation.runner import evaluate
+from mani_skill_softvt.fileio import append_jsonl, atomic_write, read_jsonl
+from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
 from .openloop import load_run_windows, openloop
 
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
@@ -247,7 +247,7 @@ def plot_curves(variant: str, results_dir: Path = RESULTS_DIR, closed: dict | No
 
 
 def main(argv=None) -> str:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.recipe_search", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.recipe_search", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", default="vo-c", choices=VARIANTS)
     ap.add_argument("--recipes", nargs="+", default=["base"], help=f"of {sorted(RECIPES)}, trained in this order")

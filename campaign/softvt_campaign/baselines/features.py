@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.images import resize_image
-from ..observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
-from ..physics.transforms import down_rotvec
-from ..actions import base_frame_pose
+from mani_skill_softvt.data.images import resize_image
+from mani_skill_softvt.observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
+from mani_skill_softvt.physics.transforms import down_rotvec
+from mani_skill_softvt.actions import base_frame_pose
 from .config import DPConfig
 
 # Bumped whenever frame_features computes anything differently: prepared training data is keyed by it.

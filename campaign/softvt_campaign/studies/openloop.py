@@ -1,6 +1,6 @@
 """Open-loop error of a trained baseline on held-out demonstrations: the recipe search's cheap measure.
 
-    python -m mani_skill_softvt.studies.openloop outputs/baselines/object_soft/vo-c-cpu/policy.pt
+    python -m softvt_campaign.studies.openloop outputs/baselines/object_soft/vo-c-cpu/policy.pt
 
 A run trained with ``--set heldout_per_task=N`` never saw the last N demos of each task. At every
 step where the agent would replan (every ``action_steps`` steps of an episode), the policy
@@ -26,8 +26,8 @@ from ..baselines.agent import GRIPPER, executed_actions, load_policy_file
 from ..baselines.dataset import DemoWindows, load_windows
 from ..baselines.model import noise_scheduler
 from ..baselines.train import CACHE
-from ..fileio import atomic_write_json
-from ..paths import DEMOS_DIR
+from mani_skill_softvt.fileio import atomic_write_json
+from mani_skill_softvt.paths import DEMOS_DIR
 
 
 def action_errors(pred: np.ndarray, target: np.ndarray) -> dict[str, np.ndarray]:
@@ -133,7 +133,7 @@ def format_openloop(result: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.studies.openloop", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.openloop", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("policy", type=Path, help="a policy.pt of a run trained with heldout_per_task > 0")
     ap.add_argument("--demos", type=Path, default=DEMOS_DIR, help="demos root (generate + render output)")
