@@ -64,7 +64,7 @@ def softvt_obs(obs_mode: str, size: int, frames: int) -> float:
 
 def demo_render(size: int) -> tuple[float, int]:
     """Milliseconds per frame of rendering the sample demo into rgb+tactile at ``size``; frames."""
-    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.demonstrations.render import render_observations
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

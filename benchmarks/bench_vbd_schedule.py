@@ -58,7 +58,7 @@ def grasp_trials(asset_id: str, closures: list[float], seed: int) -> list[dict]:
 
     import mani_skill_softvt.tasks  # noqa: F401
     from mani_skill_softvt.calibration import protocol as P
-    from mani_skill_softvt.calibrate import run_trial
+    from mani_skill_softvt.expert.calibration_trials import run_trial
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
     sim_s = sum(P.STEPS.values()) / 20.0

@@ -124,7 +124,7 @@ def calibration_trial() -> dict:
     import gymnasium as gym
 
     from .assets.cards import ASSET_IDS
-    from .calibrate import run_trial
+    from .expert.calibration_trials import run_trial
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=ASSET_IDS[0])
     try:

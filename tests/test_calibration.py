@@ -43,7 +43,7 @@ def test_committed_card_is_sane(asset_id):
 
 @pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_quick_mode_reproduces_the_committed_card_and_the_envelope_holds(tmp_path):
-    from mani_skill_softvt.calibrate import QUICK_ASSET, main
+    from mani_skill_softvt.cli.calibrate import QUICK_ASSET, main
 
     from mani_skill_softvt.fileio import read_jsonl
 
@@ -74,7 +74,7 @@ def test_rigid_twin_holds_without_deforming_under_the_full_squeeze(soft_id):
 
     import mani_skill_softvt  # noqa: F401
     from mani_skill_softvt.assets.cards import twin_id
-    from mani_skill_softvt.calibrate import run_trial
+    from mani_skill_softvt.expert.calibration_trials import run_trial
     from mani_skill_softvt.data.seeds import calibration_seed
 
     card = load_calibration_card(soft_id)
@@ -125,8 +125,8 @@ def test_committed_cards_and_sweep_logs_match_the_current_physics():
 
 
 def test_a_sweep_log_from_other_physics_is_refused_and_restart_sets_it_aside(tmp_path):
-    from mani_skill_softvt.calibrate import set_aside
-    from mani_skill_softvt.calibrate import sweep_asset
+    from mani_skill_softvt.expert.calibration_trials import set_aside
+    from mani_skill_softvt.expert.calibration_trials import sweep_asset
     from mani_skill_softvt.fileio import append_jsonl, read_jsonl
     from mani_skill_softvt.physics.constants import physics_signature
 

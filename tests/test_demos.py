@@ -9,7 +9,8 @@ import pytest
 import torch
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.demos import format_stats, generate, stats
+from mani_skill_softvt.demonstrations.generate import generate
+from mani_skill_softvt.demonstrations.stats import format_stats, stats
 from mani_skill_softvt.data.trajectory import read_episode, screen
 
 
@@ -56,7 +57,7 @@ def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_
     os.utime(episode, ns=(before[0] + 10**9, before[0] + 10**9))  # as if recorded again after the merge
     generate("object_soft", [3], 1, out)
     assert merged.stat().st_mtime_ns > before[0] and merged.read_bytes() == before[1]
-    from mani_skill_softvt.demos import merged_is_current
+    from mani_skill_softvt.demonstrations.generate import merged_is_current
 
     seed = json.loads(merged.with_suffix(".json").read_text())["episodes"][0]["episode_seed"]
     assert merged_is_current(merged, merged.with_suffix(".json"), [seed], [episode])
@@ -136,7 +137,8 @@ def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_
     (logged) is skipped, the next seed is drawn, and drawing stops at the count asked."""
     from mani_skill_softvt.data.demo_set import DemoSet
     from mani_skill_softvt.data.seeds import train_seed
-    from mani_skill_softvt.demos import accepted_demos_expected, main
+    from mani_skill_softvt.cli.demos import main
+    from mani_skill_softvt.demonstrations.generate import accepted_demos_expected
     from mani_skill_softvt.fileio import append_jsonl
 
     demo_set = DemoSet(tmp_path, "object_rigid")
@@ -222,7 +224,7 @@ def test_stats(dataset, tmp_path):
 
 def test_episodes_recorded_again_are_compared_with_their_first_verdict():
     from mani_skill_softvt.data.demo_set import latest_verdicts
-    from mani_skill_softvt.demos import rerecord_agreement
+    from mani_skill_softvt.demonstrations.stats import rerecord_agreement
 
     def line(seed, accepted=True, steps=150, r_max=0.5):
         return {"seed": seed, "accepted": accepted, "steps": steps, "r_max": r_max, "problems": []}
@@ -245,7 +247,7 @@ def test_episodes_recorded_again_are_compared_with_their_first_verdict():
 
 
 def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
-    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.demonstrations.render import render_observations
 
     out, _ = dataset
     src = out / "object_soft" / "task3.h5"
@@ -269,7 +271,7 @@ def test_a_rigid_twins_touch_renders_from_its_stored_states_as_the_live_episode_
     pressed frames, each pad's indentation within the observation's 1 um rounding (restored link
     poses can differ from the stepped ones in their last bits), and a patch exactly while the
     recorded pad force holds the twin."""
-    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.demonstrations.render import render_observations
     from mani_skill_softvt.evaluation.wrapper import make_env
     from mani_skill_softvt.observations import flatten_batch
     from mani_skill_softvt.paths import REPO_DIR
@@ -300,7 +302,7 @@ def test_a_rigid_trajectory_recorded_without_its_contact_state_is_refused_for_to
     """An older rigid recording would render its pinch as a blank gel: refused, naming the file and the fix."""
     import shutil
 
-    from mani_skill_softvt.demos import render_observations
+    from mani_skill_softvt.demonstrations.render import render_observations
     from mani_skill_softvt.paths import REPO_DIR
 
     src = tmp_path / "task3.h5"
@@ -321,7 +323,7 @@ def test_render_at_a_camera_size_shows_the_same_views_with_fewer_pixels(dataset,
 
     from mani_skill_softvt.data.demo_set import DemoSet
     from mani_skill_softvt.data.images import resize_image
-    from mani_skill_softvt.demos import main
+    from mani_skill_softvt.cli.demos import main
 
     out, _ = dataset
     shutil.copytree(out / "object_soft", tmp_path / "object_soft")
@@ -348,7 +350,7 @@ def test_truncated_demo_files_are_named(dataset, tmp_path, capsys):
 
     from mani_skill_softvt.data.demo_set import DemoSet
     from mani_skill_softvt.data.trajectory import CorruptDataError
-    from mani_skill_softvt.demos import main
+    from mani_skill_softvt.cli.demos import main
 
     src, _ = dataset
     out = tmp_path / "demos"
@@ -388,7 +390,7 @@ def _stored_episodes(path, episodes):
 
 def test_render_resumes_only_over_a_complete_current_rendering(tmp_path):
     from mani_skill_softvt.data.trajectory import episode_digest
-    from mani_skill_softvt.demos import rendering_is_current
+    from mani_skill_softvt.demonstrations.render import rendering_is_current
 
     traj, rendered = tmp_path / "task0.h5", tmp_path / "task0_rgb_tactile.h5"
     _stored_episodes(traj, [(7, 3), (8, 4)])
@@ -537,7 +539,7 @@ def test_a_task_another_run_rendered_meanwhile_is_not_rendered_again(tmp_path):
     rendered in between is found current under the lock and counted, not rendered (no env built)."""
     from mani_skill_softvt.data.demo_set import DemoSet
     from mani_skill_softvt.data.trajectory import RENDER_VERSION, episode_digest
-    from mani_skill_softvt.demos import _render_task
+    from mani_skill_softvt.demonstrations.render import _render_task
 
     demo_set = DemoSet(tmp_path, "object_soft")
     demo_set.dir.mkdir(parents=True)

@@ -34,7 +34,7 @@ CAMPAIGN_MODULES = {_module_name(p): p for p in CAMPAIGN.rglob("*.py")}
 ALIASES = {"mani_skill_softvt.motionplanning", "mani_skill_softvt.replay", "mani_skill_softvt.serve",
            "mani_skill_softvt.evaluation.maniskill_dp", "mani_skill_softvt.baselines", "mani_skill_softvt.studies",
            "mani_skill_softvt.evaluate", "mani_skill_softvt.compare", "mani_skill_softvt.gallery",
-           "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo"}
+           "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo", "mani_skill_softvt.calibrate", "mani_skill_softvt.demos"}
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -109,7 +109,7 @@ def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
 # Observation keys are spelled in the contract (mani_skill_softvt/observations.py) and nowhere a
 # consumer reads them.
 CONSUMERS = [PACKAGE / m for m in ("integrations/openpi/remote.py", "integrations/openpi/serve.py",
-                                    "integrations/lerobot/export.py", "evaluation/videos.py", "demos.py",
+                                    "integrations/lerobot/export.py", "evaluation/videos.py", "demonstrations/render.py",
                                     "evaluation/policies.py")] + \
             [CAMPAIGN / m for m in ("baselines/features.py", "baselines/dataset.py", "baselines/agent.py")]
 KEY_SPELLINGS = ('"agent/qpos"', '"extra/tcp_pose"', "sensor_data/", '"tactile/', "tactile/{", '"base_camera"',
@@ -216,7 +216,8 @@ def test_no_package_imports_itself_back():
 def test_the_core_library_imports_no_integration():
     """ManiSkill's tools, LeRobot and openpi plug into the library (integrations/); the library's own
     packages never reach up into them: the commands and the baselines may use them."""
-    core = ("assets", "physics", "tactile", "calibration", "tasks", "expert", "data", "evaluation", "rollout",
+    core = ("assets", "physics", "tactile", "calibration", "tasks", "expert", "data", "evaluation", "demonstrations",
+            "rollout",
             "observations", "policy", "parallel", "numerics", "fileio", "paths", "version", "stack")
     for name, deps in _module_graph().items():
         if name != "mani_skill_softvt" and name.split(".")[1] in core:

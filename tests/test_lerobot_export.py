@@ -16,8 +16,8 @@ import pyarrow.parquet as pq
 import pytest
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
-from mani_skill_softvt.demos import main
-from mani_skill_softvt.demos import render_observations
+from mani_skill_softvt.cli.demos import main
+from mani_skill_softvt.demonstrations.render import render_observations
 from mani_skill_softvt.integrations.lerobot.export import (STATE_PARTS, Source, depth_sources, export_lerobot, marker_sources,
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR

@@ -143,7 +143,7 @@ def test_writers_refuse_to_default_into_the_installed_package(tmp_path, monkeypa
     assert not inside_installed_package(repo / "mani_skill_softvt" / "x", repo / "mani_skill_softvt")
 
     # The commands themselves, as installed: a usage error before any work.
-    from mani_skill_softvt import calibrate, demos
+    from mani_skill_softvt.cli import calibrate, demos
     from mani_skill_softvt.assets import build
 
     monkeypatch.setattr(paths, "PACKAGE_DIR", package)

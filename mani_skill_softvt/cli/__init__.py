@@ -6,10 +6,12 @@
   pre-registered seed-level rule;
 - :mod:`.gallery` (``softvt-gallery``): the asset and tactile galleries of the documentation;
 - :mod:`.warmup` (``softvt-warmup``): the Warp kernel cache;
-- :mod:`.grasp_demo`: the calibration's scripted grasp as a video.
+- :mod:`.grasp_demo`: the calibration's scripted grasp as a video;
+- :mod:`.calibrate` (``softvt-calibrate``): the per-object calibration cards;
+- :mod:`.demos` (``softvt-demos``): expert demos generated, rendered, summarised, exported to LeRobot.
 
-Each keeps its old path (``python -m mani_skill_softvt.evaluate`` ...) as an alias for one release.
-The calibration and demo commands (``calibrate.py``, ``demos.py``) still hold their library beside
-their parsing at the package root; the ManiSkill, LeRobot and openpi commands live with their
-integrations (``integrations/``), the campaign's with the campaign (``campaign/``).
+``python -m mani_skill_softvt.evaluate``, ``.calibrate`` and ``.demos`` stay (README's paths), thin
+aliases of these; the others' old paths are aliases for one release. The ManiSkill, LeRobot and
+openpi commands live with their integrations (``integrations/``), the campaign's with the campaign
+(``campaign/``).
 """

@@ -203,7 +203,7 @@ def write_rendering(trajectory_h5: Path, out_h5: Path, obs_mode: str, observe_ep
 
     ``observe_episode(seed, states)`` restores each of an episode's recorded env states (flat
     ``env_states`` keys, (T+1, ...) arrays: reset + one per step) in order and returns one flat
-    observation per state (:func:`mani_skill_softvt.demos.render_observations` does it with the
+    observation per state (:func:`mani_skill_softvt.demonstrations.render.render_observations` does it with the
     env). Observations go to ``traj_<i>/obs/...`` of ``out_h5``, beside the episode's actions,
     flags and attributes (and its source's :func:`episode_digest`), and the trajectory's json is
     written beside it: ``out_h5`` is a ManiSkill trajectory in ``obs_mode`` (with the

@@ -1,6 +1,6 @@
 """A scripted top-down grasp, lift, hold and place, in absolute end-effector pose actions.
 
-The calibration trial (grasp, lift, hold: :func:`mani_skill_softvt.calibrate.run_trial`), the grasp demo, the tactile gallery and
+The calibration trial (grasp, lift, hold: :func:`mani_skill_softvt.expert.calibration_trials.run_trial`), the grasp demo, the tactile gallery and
 the physics tests use it: it drives any :class:`~mani_skill_softvt.tasks.SoftBodyEnv` whose
 control mode is ``pd_ee_pose`` and records, per control step, the evaluator-side quantities (D_t,
 jaw width, object height, pad force) that those consumers score.

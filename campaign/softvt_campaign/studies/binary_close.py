@@ -149,7 +149,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=Path("baselines/results"))
     args = ap.parse_args(argv)
     if args.seeds is not None:
-        from mani_skill_softvt.demos import generate  # the expert and its planner: only when generating
+        from mani_skill_softvt.demonstrations.generate import generate  # the expert and its planner: only when generating
         generate(args.suite, list(range(NUM_TASKS)), args.seeds, args.demos, workers=args.workers,
                  control_mode="pd_ee_pose_binary")
     try:
