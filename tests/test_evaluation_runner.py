@@ -66,6 +66,26 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
     assert "another stack (torch 0.0.0 -> " in out
 
 
+def test_a_run_made_in_another_obs_mode_than_todays_default_is_resumed_in_its_mode(tmp_path, soft_cube_expert_run,
+                                                                                    capsys):
+    """A records file holding a run made when the default obs mode was another (the expert's
+    state_dict records from before the default became state): evaluate without --obs-mode resumes
+    that run, in its mode, instead of running its episodes again as another run beside it."""
+    from mani_skill_softvt.cli import evaluate as evaluate_cli
+    from mani_skill_softvt.evaluation.run import RunConfig
+
+    _, full, _ = soft_cube_expert_run
+    assert full[0]["obs_mode"] == "state"  # today's default
+    older = dict(full[0], obs_mode="state_dict")
+    older["record_sha256"] = record_hash(older)
+    path = tmp_path / f"{RunConfig.resolve('expert', suite='object_soft', tasks=(3,)).stem}.jsonl"
+    path.write_text(json.dumps(older) + "\n")
+    evaluate_cli.main(["--tasks", "3", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert "resuming the run" in out and "in obs mode state_dict" in out, out
+    assert len(path.read_text().splitlines()) == 1  # nothing ran again
+
+
 def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
     from mani_skill_softvt.evaluation.run import policy_tag, records_stem
     from mani_skill_softvt.evaluation.runner import reproduce

@@ -31,7 +31,7 @@ from ..evaluation.provenance import sidecar
 from ..evaluation.records import RecordIntegrityError, read_records
 from ..evaluation.report import plot_ood_curves, plot_traces, write_report
 from ..evaluation.run import DEFAULT_TASKS, RunConfig
-from ..evaluation.runner import evaluate, relative_difference, reproduce, run_records
+from ..evaluation.runner import evaluate, recorded_obs_modes, relative_difference, reproduce, run_records
 from ..evaluation.videos import record_episode_video, video_name
 from ..observations import parse_image_size
 from ..numerics import numerics_of, reproduction_note
@@ -90,12 +90,22 @@ def main(argv=None) -> dict:
         return _reproduce(ap, args.reproduce, args.episodes_per_task or 1, args.workers)
     if args.video < 0:
         ap.error("--video must be >= 0")
+    def resolve(obs_mode):
+        return RunConfig.resolve(args.policy, obs_mode, args.control_mode,
+                                 None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size"),
+                                 suite=args.suite, protocol=args.protocol, tasks=args.tasks,
+                                 episodes_per_task=1 if args.episodes_per_task is None else args.episodes_per_task,
+                                 conditions=args.conditions)
+
     try:
-        run = RunConfig.resolve(args.policy, args.obs_mode, args.control_mode,
-                                None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size"),
-                                suite=args.suite, protocol=args.protocol, tasks=args.tasks,
-                                episodes_per_task=1 if args.episodes_per_task is None else args.episodes_per_task,
-                                conditions=args.conditions)
+        run = resolve(args.obs_mode)
+        # No --obs-mode: a run the records file holds in another mode (made when the default was
+        # another) is resumed in its mode, not started again beside it.
+        modes = set() if args.obs_mode else recorded_obs_modes(args.out / f"{run.stem}.jsonl", run)
+        if len(modes) == 1 and run.obs_mode not in modes:
+            run = resolve(modes.pop())
+            print(f"note: resuming the run {args.out / f'{run.stem}.jsonl'} holds, in obs mode {run.obs_mode} "
+                  "(give --obs-mode to start another run)")
     except (ValueError, FileNotFoundError) as e:
         ap.error(str(e))
     if args.workers < 1:

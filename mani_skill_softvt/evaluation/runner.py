@@ -63,6 +63,16 @@ def run_records(path: Path, run: RunConfig) -> dict[tuple, dict]:
     return {episode_key(r): r for r in read_records(path) if is_run_record(r, fields, run.policy.sha256)}
 
 
+def recorded_obs_modes(path: Path, run: RunConfig) -> set[str]:
+    """The obs modes in which ``path`` holds records of ``run`` but for its obs mode (same policy,
+    policy file, control mode): where a run was made in another mode than today's default, resuming
+    it in that mode continues it instead of starting another run beside it."""
+    if not Path(path).is_file():
+        return set()
+    fields = {k: v for k, v in run.record_fields().items() if k in ("policy", "control_mode")}
+    return {r["obs_mode"] for r in read_records(path) if is_run_record(r, fields, run.policy.sha256)}
+
+
 def is_run_record(rec: dict, fields: dict, policy_sha256: str | None) -> bool:
     return all(rec.get(k) == v for k, v in fields.items()) and \
         rec.get("policy_sha256", policy_sha256) == policy_sha256
