@@ -40,6 +40,7 @@ either form.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -65,7 +66,46 @@ TCP_POSE, GRIPPER_WIDTH = "extra/tcp_pose", "extra/gripper_width"
 # The flat ``state`` vector (obs mode ``state``; ``state`` of a "+state" mode): ManiSkill flattens
 # ``agent`` then ``extra`` in this order.
 STATE_LAYOUT = ((QPOS, 9), (QVEL, 9), (TCP_POSE, 7), (GRIPPER_WIDTH, 1))
-NATIVE_CAMERA_SIZE = (224, 224)  # (height, width) of both cameras by default (the paper's views)
+
+
+class CameraSize(NamedTuple):
+    """(height, width) of both policy cameras: the one type a camera size has in this package.
+    Every spelling one is given in becomes one through :meth:`of`: None and ``"native"`` (the
+    cameras' own 224x224, the paper's views), ``"HxW"`` on a command line, a (height, width) pair
+    from a record, a policy file or a config. A tuple itself, so it compares and serialises as one.
+    (The GelSights are not cameras: their 240x320 image is the sensor's.)"""
+
+    height: int
+    width: int
+
+    @classmethod
+    def of(cls, value, what: str = "camera_size") -> "CameraSize":
+        """``value`` as a camera size; ValueError naming ``what`` (a flag, a field) and what to give."""
+        if value is None or value == "native":
+            return NATIVE_CAMERA_SIZE
+        try:
+            h, w = (int(v) for v in (value.lower().split("x") if isinstance(value, str) else value))
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} {value!r}: give HxW (e.g. 84x84), (height, width), or 'native'") from None
+        if min(h, w) < 8:
+            raise ValueError(f"{what} {h}x{w}: give (height, width), each at least 8 pixels")
+        return cls(h, w)
+
+    @property
+    def native(self) -> bool:
+        return self == NATIVE_CAMERA_SIZE
+
+    @property
+    def name(self) -> str:
+        """``84x84``: how a camera size appears in file names and on the command line."""
+        return f"{self.height}x{self.width}"
+
+    def sensor_configs(self) -> dict:
+        """ManiSkill ``sensor_configs`` that render both cameras at this size (empty when native)."""
+        return {} if self.native else {"width": self.width, "height": self.height}
+
+
+NATIVE_CAMERA_SIZE = CameraSize(224, 224)  # both cameras by default (the paper's views)
 
 
 @dataclass(frozen=True)
@@ -123,38 +163,26 @@ class ObsMode:
         return self.camera == "sensor_data"
 
 
-def is_native_camera_size(camera_size: tuple[int, int] | None) -> bool:
-    """Whether ``camera_size`` is the cameras' own 224x224 (None says the same)."""
-    return camera_size is None or tuple(int(v) for v in camera_size) == NATIVE_CAMERA_SIZE
+def is_native_camera_size(camera_size) -> bool:
+    """Whether ``camera_size`` (any spelling :meth:`CameraSize.of` takes) is the cameras' own 224x224."""
+    return CameraSize.of(camera_size).native
 
 
-def camera_sensor_configs(camera_size: tuple[int, int] | None) -> dict:
-    """ManiSkill ``sensor_configs`` that render both cameras at ``camera_size`` = (height, width);
-    empty for None or the native size. (The GelSights are not cameras: their 240x320 image is
-    the sensor's.)"""
-    if is_native_camera_size(camera_size):
-        return {}
-    h, w = (int(v) for v in camera_size)
-    if min(h, w) < 8:
-        raise ValueError(f"camera_size {tuple(camera_size)}: give (height, width), each at least 8 pixels")
-    return {"width": w, "height": h}
+def camera_sensor_configs(camera_size) -> dict:
+    """ManiSkill ``sensor_configs`` that render both cameras at ``camera_size`` (:meth:`CameraSize.of`);
+    empty for None or the native size."""
+    return CameraSize.of(camera_size).sensor_configs()
 
 
 def parse_image_size(text: str, flag: str = "--image-size") -> tuple[int, int] | None:
-    """``HxW`` on a command line -> (H, W); ``native`` -> None (each stream keeps its size)."""
-    if text == "native":
-        return None
-    try:
-        h, w = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"{flag} {text!r}: give HxW (e.g. 84x84) or 'native'") from None
-    return h, w
+    """``HxW`` on a command line -> (H, W); ``native`` -> None (each stream keeps its own size: an
+    image size, for every stream; a camera size is :meth:`CameraSize.of`)."""
+    return None if text == "native" else tuple(CameraSize.of(text, flag))
 
 
-def camera_size_name(camera_size: tuple[int, int] | None) -> str:
+def camera_size_name(camera_size) -> str:
     """``84x84``: how a camera size appears in file names and on the command line."""
-    h, w = camera_size or NATIVE_CAMERA_SIZE
-    return f"{h}x{w}"
+    return CameraSize.of(camera_size).name
 
 
 def camera_key(camera: str, texture: str = "rgb") -> str:

@@ -10,6 +10,8 @@ from the surface). The squeeze moves the surface by more than those bounds, so t
 the squeezed shape from the rest shape.
 """
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -18,7 +20,7 @@ import trimesh
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.calibration import protocol as P
 from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
-from mani_skill_softvt.observations import OBS_MODES, TEXTURES, ObsMode
+from mani_skill_softvt.observations import NATIVE_CAMERA_SIZE, OBS_MODES, TEXTURES, CameraSize, ObsMode
 from mani_skill_softvt.physics.transforms import yaw_between
 
 DEPTH_QUANTUM = 1e-3  # m: ManiSkill's depth and SAPIEN's position texture are int16 millimetres
@@ -47,6 +49,19 @@ def back_project(depth_mm, pixels, intrinsic_cv, extrinsic_cv):
     cam = np.c_[(cols + 0.5 - k[0, 2]) * z / k[0, 0], (rows + 0.5 - k[1, 2]) * z / k[1, 1], z]
     rot, t = extrinsic_cv[:, :3].astype(np.float64), extrinsic_cv[:, 3].astype(np.float64)
     return (cam - t) @ rot, z / np.linalg.norm(cam, axis=1)
+
+
+def test_every_spelling_of_a_camera_size_is_one_camera_size():
+    """None, "native", "HxW", a (height, width) pair from a record: one type, one meaning."""
+    assert CameraSize.of(None) == CameraSize.of("native") == CameraSize.of([224, 224]) == NATIVE_CAMERA_SIZE
+    assert NATIVE_CAMERA_SIZE.native and NATIVE_CAMERA_SIZE.sensor_configs() == {}
+    small = CameraSize.of("84x96", "--camera-size")
+    assert small == (84, 96) == CameraSize.of((84, 96)) and (small.height, small.width, small.name) == (84, 96, "84x96")
+    assert not small.native and small.sensor_configs() == {"width": 96, "height": 84}
+    for bad, message in (("84", "--camera-size '84': give HxW"), ("4x4", "--camera-size 4x4: give (height, width), "
+                                                                         "each at least 8 pixels")):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            CameraSize.of(bad, "--camera-size")
 
 
 def test_named_obs_modes_render_maniskills_textures():

@@ -27,7 +27,7 @@ from ..demonstrations.generate import generate
 from ..demonstrations.render import render
 from ..demonstrations.stats import format_stats, stats
 from ..integrations.lerobot.export import export_lerobot
-from ..observations import ObsMode, camera_sensor_configs, parse_image_size
+from ..observations import CameraSize, ObsMode, parse_image_size
 from ..paths import DEMOS_DIR, writable_default
 from ..tasks.suites import NUM_TASKS, SUITES
 
@@ -125,8 +125,7 @@ def _render(ap: argparse.ArgumentParser, args) -> None:
     if args.workers < 1:
         ap.error("--workers must be >= 1")
     try:
-        camera_size = parse_image_size(args.camera_size, "--camera-size")
-        camera_sensor_configs(camera_size)
+        camera_size = CameraSize.of(args.camera_size, "--camera-size")
         if not ObsMode.parse(args.obs_mode).images:
             raise ValueError(f"--obs-mode {args.obs_mode}: a rendering is of camera images; give a camera mode "
                              "(rgb+tactile, rgbd+tactile, pointcloud...)")
@@ -144,7 +143,7 @@ def _export_lerobot(ap: argparse.ArgumentParser, args) -> dict:
     demo_set = DemoSet(args.out, args.suite)
     tasks = demo_set.tasks_with_trajectories() if args.tasks == ["all"] else [int(t) for t in args.tasks]
     try:
-        sources = demo_set.rendered_sources(tasks, args.obs_mode, parse_image_size(args.camera_size, "--camera-size"))
+        sources = demo_set.rendered_sources(tasks, args.obs_mode, CameraSize.of(args.camera_size, "--camera-size"))
         info = export_lerobot(sources, args.lerobot_out,
                               use_videos=not args.no_video, image_size=parse_image_size(args.image_size))
     except (FileNotFoundError, ValueError, OSError) as err:  # OSError: CorruptDataError names the file

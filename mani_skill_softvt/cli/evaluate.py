@@ -33,7 +33,7 @@ from ..evaluation.report import plot_ood_curves, plot_traces, write_report
 from ..evaluation.run import DEFAULT_TASKS, RunConfig
 from ..evaluation.runner import evaluate, recorded_obs_modes, relative_difference, reproduce, run_records
 from ..evaluation.videos import record_episode_video, video_name
-from ..observations import parse_image_size
+from ..observations import CameraSize
 from ..numerics import numerics_of, reproduction_note
 from ..stack import MACHINE_KEYS, software_stack, stack_differences, unrecorded
 from ..tasks.suites import SUITES, task_spec
@@ -92,7 +92,7 @@ def main(argv=None) -> dict:
         ap.error("--video must be >= 0")
     def resolve(obs_mode):
         return RunConfig.resolve(args.policy, obs_mode, args.control_mode,
-                                 None if args.camera_size is None else parse_image_size(args.camera_size, "--camera-size"),
+                                 None if args.camera_size is None else CameraSize.of(args.camera_size, "--camera-size"),
                                  suite=args.suite, protocol=args.protocol, tasks=args.tasks,
                                  episodes_per_task=1 if args.episodes_per_task is None else args.episodes_per_task,
                                  conditions=args.conditions)

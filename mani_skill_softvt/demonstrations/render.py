@@ -21,7 +21,7 @@ from ..data.trajectory import (
     write_rendering,
 )
 from ..evaluation.wrapper import make_env
-from ..observations import camera_sensor_configs, camera_size_name, flatten_batch, tactile_keys
+from ..observations import camera_sensor_configs, camera_size_name, flatten_batch, is_native_camera_size, tactile_keys
 from ..parallel import run_tasks
 from ..tasks.objects import TWIN_CONTACT_STATE
 from ..tasks.suites import get_suite
@@ -140,7 +140,7 @@ def render(suite: str, tasks: list[int], out: Path, obs_mode: str, camera_size: 
             shutil.rmtree(rendering_parts_dir(dst), ignore_errors=True)  # a run killed after its last pack
         else:
             todo.append((suite, t, str(out), obs_mode, camera_size))
-    size = "" if camera_size is None else f" {camera_size_name(camera_size)}"
+    size = "" if is_native_camera_size(camera_size) else f" {camera_size_name(camera_size)}"
     done = []
     episodes = sum(_episodes(demo_set.trajectory(item[1])) for item in todo)
     with tqdm(total=episodes, desc=f"render {obs_mode}{size}", unit="episode") as bar:
