@@ -16,8 +16,8 @@ one process and beside ManiSkill's PickCube-v1:
   2 s after the settle: how fast its centroid creeps sideways (VBD's smoothed friction has no
   stiction; an under-converged sweep leaves a net force).
 
-Nothing is changed in the package: each schedule is set through the physics constants before its
-env is built (``vbd_schedule`` reads them then).
+Nothing is changed in the package: each schedule is an override of the env's physics config
+(``gym.make(..., physics={"newton_substeps": 2, ...})``, physics/config.py), as a user would pass it.
 """
 
 from __future__ import annotations
@@ -46,21 +46,21 @@ def parse_schedule(text: str) -> tuple[int, int, float | None]:
     return substeps, iterations, epsilon
 
 
-def with_schedule(substeps: int, iterations: int, epsilon: float | None, package_epsilon: float) -> None:
-    from mani_skill_softvt.physics import constants as C
+def schedule_overrides(substeps: int, iterations: int, epsilon: float | None) -> dict:
+    """The env's physics overrides of a schedule (epsilon None: the package's friction smoothing)."""
+    return {"newton_substeps": substeps, "vbd_iterations": iterations,
+            **({} if epsilon is None else {"friction_epsilon": epsilon})}
 
-    C.NEWTON_SUBSTEPS, C.VBD_ITERATIONS = substeps, iterations
-    C.FRICTION_EPSILON = package_epsilon if epsilon is None else epsilon
 
-
-def grasp_trials(asset_id: str, closures: list[float], seed: int) -> list[dict]:
+def grasp_trials(asset_id: str, closures: list[float], seed: int, physics: dict) -> list[dict]:
     import gymnasium as gym
 
     import mani_skill_softvt.tasks  # noqa: F401
     from mani_skill_softvt.calibration import protocol as P
     from mani_skill_softvt.expert.calibration_trials import run_trial
 
-    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id)
+    env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id,
+                   physics=physics)
     sim_s = sum(P.STEPS.values()) / 20.0
     out = []
     try:
@@ -75,7 +75,7 @@ def grasp_trials(asset_id: str, closures: list[float], seed: int) -> list[dict]:
     return out
 
 
-def resting_drift(asset_id: str, seed: int, seconds: float = 2.0) -> float:
+def resting_drift(asset_id: str, seed: int, physics: dict, seconds: float = 2.0) -> float:
     """Sideways speed (m/s) of the awake object's centroid on the table, robot still and away."""
     import gymnasium as gym
 
@@ -83,7 +83,7 @@ def resting_drift(asset_id: str, seed: int, seconds: float = 2.0) -> float:
     from mani_skill_softvt.actions import ee_action
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id,
-                   soft_sleep=False)
+                   soft_sleep=False, physics=physics)
     try:
         env.reset(seed=seed)
         u = env.unwrapped
@@ -113,23 +113,23 @@ def main() -> None:
     args = ap.parse_args()
 
     from mani_skill_softvt.calibration.cards import load_calibration_card
-    from mani_skill_softvt.physics import constants as C
+    from mani_skill_softvt.physics.config import DEFAULT_PHYSICS
 
     card = load_calibration_card(args.asset)
     closures = [card.g_min, round(0.5 * (card.g_min + card.g_max), 2)]
     pickcube = 1.0 / bench_pickcube("state", args.pickcube_steps)  # wall s per simulated s
-    rows, package_epsilon = [], C.FRICTION_EPSILON
+    rows = []
     for substeps, iterations, epsilon in args.schedules:
-        with_schedule(substeps, iterations, epsilon, package_epsilon)
-        trials = grasp_trials(args.asset, closures, args.seed)
-        drift = resting_drift(args.asset, args.seed)
+        physics = schedule_overrides(substeps, iterations, epsilon)
+        trials = grasp_trials(args.asset, closures, args.seed, physics)
+        drift = resting_drift(args.asset, args.seed, physics)
         name = f"{substeps}x{iterations}" + ("" if epsilon is None else f" @ eps {epsilon:g} m/s")
         rows.append({"schedule": name, "sweeps_per_tick": substeps * iterations,
                      "trials": trials, "drift_mm_s": 1e3 * drift})
 
     print(f"\n{args.asset} (tau_o {card.tau_o:.4f}); PickCube-v1 physics {pickcube:.3f} wall s per simulated s "
           f"(same run); closures g_min {closures[0]} and mid-envelope {closures[1]}, seed {args.seed}; "
-          f"friction smoothing {package_epsilon:g} m/s unless the row says otherwise\n")
+          f"friction smoothing {DEFAULT_PHYSICS.friction_epsilon:g} m/s unless the row says otherwise\n")
     print("| schedule | sweeps / tick | closure | held | slip mm | peak D / tau_o | pad N | wall s / sim s "
           "| x PickCube | resting drift mm/s |")
     print("|---|---|---|---|---|---|---|---|---|---|")

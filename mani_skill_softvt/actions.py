@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from .physics.transforms import down_rotvec, quat_to_rotvec
+from .provenance import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND  # noqa: F401  (the contract's)
 
 # The robot base in the world: [x, y, z, qw, qx, qy, qz] (translated only; base_frame_pose checks it).
 ROBOT_BASE_POSE = np.array([-0.615, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
@@ -55,17 +56,7 @@ def q_to_closure(q):
     return (q - GRIPPER_Q_OPEN) / (GRIPPER_Q_CLOSED - GRIPPER_Q_OPEN)
 
 
-# Version of the gripper actions' encoding, recorded in every trajectory file's env kwargs
-# (``gripper_action_version``). 1 (files without the kwarg): the closure in [0, 1] in every mode;
-# 2: ManiSkill's normalised action in the joint and delta modes, the closure in pd_ee_pose.
-GRIPPER_ACTION_VERSION = 2
-UPGRADE_COMMAND = "python -m mani_skill_softvt.replay --upgrade-gripper"
-GRIPPER_ACTION_VERSIONS = {  # why an older version is refused; {path}: the file
-    1: "its joint- or delta-mode gripper actions are closures in [0, 1] (written before mani_skill_softvt used "
-       "ManiSkill's normalised gripper action in [-1, 1] in those modes); convert the file in place with "
-       f"`{UPGRADE_COMMAND} {{path}}`, then run this again",
-}
-
+# The gripper actions' encoding and its history: mani_skill_softvt/provenance.py.
 # The paper's mode: its gripper action is the closure itself. Every other arm mode is ManiSkill's and
 # takes ManiSkill's normalised gripper action.
 CLOSURE_ARM_MODES = ("pd_ee_pose",)

@@ -9,6 +9,7 @@ import pytest
 
 from mani_skill_softvt.assets.tetmesh import box_tetmesh
 from mani_skill_softvt.physics import constants as PC
+from mani_skill_softvt.physics.config import DEFAULT_PHYSICS
 from mani_skill_softvt.physics.fem import SimulationInstabilityError, SoftBodyWorld, SoftMaterial, vbd_schedule
 
 L = 0.05  # cube edge (m)
@@ -21,10 +22,10 @@ def _pose(z, x=0.0, y=0.0):
     return np.array([x, y, z, 1.0, 0.0, 0.0, 0.0])
 
 
-def _cube_world(material, colliders, resolution=6, lift=0.0, contact_ke=PC.SOFT_CONTACT_KE):
+def _cube_world(material, colliders, resolution=6, lift=0.0, contact_ke=DEFAULT_PHYSICS.soft_contact_ke):
     v, t = box_tetmesh((L, L, L), resolution)
     w = SoftBodyWorld(contact_ke=contact_ke)
-    w.add_soft_body("cube", v, t, material, pose=_pose(PC.PARTICLE_RADIUS + lift))
+    w.add_soft_body("cube", v, t, material, pose=_pose(DEFAULT_PHYSICS.particle_radius + lift))
     for name, he, local_z, mu in colliders:
         w.add_collider_box(name, he, local_pose=_pose(local_z), friction=mu)
     w.finalize()
@@ -40,7 +41,7 @@ def _compress(e_scale: float, strain: float = 0.02):
     w = _cube_world(mat, [("table", (0.1, 0.1, 0.01), -0.01, 1.0), ("plate", (0.1, 0.1, 0.01), 0.01, 1.0)],
                     contact_ke=PLATE_CONTACT_KE)
     w.scale_materials(youngs_modulus=e_scale)
-    top = PC.PARTICLE_RADIUS + L + PC.PARTICLE_RADIUS  # plate face touching the top nodes
+    top = DEFAULT_PHYSICS.particle_radius + L + DEFAULT_PHYSICS.particle_radius  # plate face touching the top nodes
     w.reset_collider_poses(np.stack([_pose(0.0), _pose(top + 1e-3)]))
     for _ in range(TICKS_PER_S // 4):  # settle under gravity
         w.step()
@@ -94,13 +95,13 @@ def _pinch(mu: float, youngs_modulus: float, squeeze: float = 1.5e-3):
     v, t = box_tetmesh((L, L, L), 6)
     substeps, iterations = vbd_schedule([youngs_modulus])
     w = SoftBodyWorld(substeps=substeps, iterations=iterations)
-    w.add_soft_body("cube", v, t, mat, pose=_pose(PC.PARTICLE_RADIUS + 0.5e-3))
+    w.add_soft_body("cube", v, t, mat, pose=_pose(DEFAULT_PHYSICS.particle_radius + 0.5e-3))
     w.add_collider_box("table", (0.1, 0.1, 0.01), local_pose=_pose(-0.01), friction=0.6)
     pad = (0.01, 0.01, 0.01)  # 20 mm pads centred at mid-height
     w.add_collider_box("left", pad, local_pose=_pose(0.0), friction=mu)
     w.add_collider_box("right", pad, local_pose=_pose(0.0), friction=mu)
     w.finalize()
-    y_touch = L / 2 + PC.PARTICLE_RADIUS + pad[1]
+    y_touch = L / 2 + DEFAULT_PHYSICS.particle_radius + pad[1]
 
     def poses(table_z, y):
         return np.stack([_pose(table_z), _pose(L / 2, y=y), _pose(L / 2, y=-y)])

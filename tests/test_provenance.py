@@ -1,47 +1,45 @@
-"""The provenance sidecar: what is known of records that do not name their machine (evaluation/provenance.py)."""
+"""Provenance (mani_skill_softvt/provenance.py): one place for the version markers, the seal of a
+record and the table of what an older file lacks; each row of the table names the code that acts
+on it, and that code exists."""
 
-import json
+import importlib
 
-from mani_skill_softvt import numerics as N
-from mani_skill_softvt.evaluation import provenance as P
-from mani_skill_softvt.paths import REPO_DIR
-from softvt_campaign.studies.results import provenance_lines
+import pytest
 
-EPYC = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
-
-
-def test_a_sidecar_entry_fills_in_what_a_file_does_not_say(tmp_path):
-    (tmp_path / "provenance.json").write_text(json.dumps(
-        {"files": {"old.jsonl": {"cpu": "AMD EPYC", "numerics": "x86-64-v3:openblas", "evidence": "notes"}}}))
-    entry = P.sidecar(tmp_path / "old.jsonl")
-    assert entry["cpu"] == "AMD EPYC" and P.sidecar(tmp_path / "other.jsonl") is None
-    assert P.sidecar(tmp_path / "elsewhere" / "old.jsonl") is None
-    stackless = [{"receipt": {}}]
-    assert P.machine(stackless, entry) == "AMD EPYC (per sidecar)" and P.machine(stackless) == "unrecorded"
-    assert P.numerics(stackless, entry) == "x86-64-v3:openblas (per sidecar)"
-    assert P.numerics(stackless) == "native (before the pins)"
-    # A record's own stack wins over the sidecar.
-    named = [{"receipt": {"stack": EPYC, "numerics": {"name": "x86-64-v3"}}}]
-    assert P.machine(named, {"cpu": "other"}) == "AMD EPYC (avx512_bf16 avx512f avx2 fma)"
-    assert P.numerics(named, entry) == "x86-64-v3"
-    assert N.numerics_of(stackless[0], entry) == "x86-64-v3:openblas" and N.numerics_of(stackless[0]) == "native"
-    assert "AMD EPYC (its instruction set unrecorded)" in N.reproduction_note(stackless[0], EPYC, entry)
+from mani_skill_softvt import actions, provenance
+from mani_skill_softvt.data import trajectory
+from mani_skill_softvt.evaluation import records
+from mani_skill_softvt.physics.config import DEFAULT_PHYSICS
+from mani_skill_softvt.tactile import constants as tactile_constants
 
 
-def test_a_table_of_files_from_two_machines_says_it_crosses_them():
-    xeon = [{"receipt": {"stack": {"cpu": "Intel(R) Xeon(R) Processor"}}}]
-    epyc = [{"receipt": {"stack": EPYC}}]
-    text = "\n".join(provenance_lines([("a.jsonl", epyc, None), ("b.jsonl", xeon, None)]))
-    assert "cross machines" in text and "| a.jsonl | AMD EPYC" in text
-    assert "cross machines" not in "\n".join(provenance_lines([("a.jsonl", epyc, None), ("c.jsonl", epyc, None)]))
+@pytest.mark.parametrize("row", provenance.UPGRADES, ids=lambda u: f"{u.file}: {u.lacks}")
+def test_each_row_of_the_upgrade_table_names_the_code_that_reads_such_a_file(row):
+    module, _, name = row.where.partition(":")
+    assert hasattr(importlib.import_module(module), name), row.where
+    assert row.read_as and row.remedy
 
 
-def test_the_committed_sidecars_name_every_file_that_does_not_name_its_machine():
-    from mani_skill_softvt.evaluation.records import read_records
+def test_the_markers_the_code_writes_are_provenances():
+    assert actions.GRIPPER_ACTION_VERSION is provenance.GRIPPER_ACTION_VERSION
+    assert trajectory.RENDER_VERSION is provenance.RENDER_VERSION
+    assert tactile_constants.model_version(True) == provenance.TACTILE_SOFT_MODEL_VERSION
+    assert tactile_constants.model_version(False) == provenance.TACTILE_MODEL_VERSION
+    assert DEFAULT_PHYSICS.signature()["EE_ORIENTATION_AXIS_ANGLE"] == provenance.EE_ORIENTATION_AXIS_ANGLE
+    assert records.record_hash is provenance.record_hash
 
-    for directory in (REPO_DIR / "baselines" / "results", REPO_DIR / "baselines" / "results" / "twins"):
-        for path in sorted(directory.glob("*.jsonl")):
-            first = read_records(path)[0]
-            if not ((first["receipt"].get("stack") or {}).get("cpu")):
-                entry = P.sidecar(path)
-                assert entry and entry["cpu"] and entry["evidence"], path
+
+def test_the_seal_covers_everything_but_the_wall_time():
+    record = provenance.seal({"r_max": 0.5, "wall_s": 1.0, "success": True})
+    assert record["record_sha256"] == provenance.record_hash({**record, "wall_s": 9.0})
+    assert record["record_sha256"] != provenance.record_hash({**record, "r_max": 0.6})
+
+
+def test_a_signature_difference_names_the_setting_and_a_missing_signature_says_so():
+    now = DEFAULT_PHYSICS.signature()
+    assert provenance.signature_differences(dict(now), now) == []
+    assert provenance.signature_differences({**now, "VBD_ITERATIONS": 3.0}, now) == \
+        ["VBD_ITERATIONS: recorded 3.0, now 5.0"]
+    older = {k: v for k, v in now.items() if k != "EE_ORIENTATION_AXIS_ANGLE"}  # made before the hand fix
+    assert provenance.signature_differences(older, now) == ["EE_ORIENTATION_AXIS_ANGLE: recorded None, now 1.0"]
+    assert "made before signatures existed" in provenance.signature_differences(None, now)[0]

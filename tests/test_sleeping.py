@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mani_skill_softvt.assets.tetmesh import box_tetmesh
-from mani_skill_softvt.physics import constants as PC
+from mani_skill_softvt.physics.config import DEFAULT_PHYSICS
 from mani_skill_softvt.physics.fem import SoftBodyWorld, SoftMaterial
 from mani_skill_softvt.physics.sleeping import (SLEEP_TICKS, box_corners, box_gap, local_bounds,
                                                 rotate_xyzw, world_boxes)
@@ -50,7 +50,7 @@ def _resting_cube_world():
     v, t = box_tetmesh((L, L, L), 6)
     w = SoftBodyWorld(sleeping=True)
     w.add_soft_body("cube", v, t, SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, friction=1.0),
-                    pose=np.array([0.0, 0.0, PC.PARTICLE_RADIUS, 1, 0, 0, 0]))
+                    pose=np.array([0.0, 0.0, DEFAULT_PHYSICS.particle_radius, 1, 0, 0, 0]))
     w.add_collider_box("table", (0.2, 0.2, 0.01), local_pose=np.array([0, 0, -0.01, 1, 0, 0, 0]), friction=0.6)
     w.add_collider_box("pusher", PUSHER_HALF, movable=True)
     w.finalize()
@@ -101,7 +101,7 @@ def test_each_body_sleeps_on_its_own():
     w = SoftBodyWorld(sleeping=True)
     material = SoftMaterial(youngs_modulus=5e4, poisson_ratio=0.3, density=300.0, friction=1.0)
     for name, x in (("pushed", 0.0), ("bystander", 0.3)):
-        w.add_soft_body(name, v, t, material, pose=np.array([x, 0.0, PC.PARTICLE_RADIUS, 1, 0, 0, 0]))
+        w.add_soft_body(name, v, t, material, pose=np.array([x, 0.0, DEFAULT_PHYSICS.particle_radius, 1, 0, 0, 0]))
     w.add_collider_box("table", (0.5, 0.5, 0.01), local_pose=np.array([0, 0, -0.01, 1, 0, 0, 0]), friction=0.6)
     w.add_collider_box("pusher", PUSHER_HALF, movable=True)
     w.finalize()

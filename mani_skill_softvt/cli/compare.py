@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from ..evaluation.metrics import paired_comparison
-from ..evaluation.provenance import machine, numerics, sidecar
+from ..evaluation.sidecar import machine, numerics, sidecar
 from ..evaluation.records import read_records
 from ..evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, first_per_task, outcome_of, rliable_summary,
                                     seed_scores, size_note, verdict)

@@ -27,7 +27,7 @@ from tqdm import tqdm
 from ..calibration.cards import load_calibration_card
 from ..evaluation.metrics import rescore_record
 from ..evaluation.protocols import PROTOCOLS
-from ..evaluation.provenance import sidecar
+from ..evaluation.sidecar import sidecar
 from ..evaluation.records import RecordIntegrityError, read_records
 from ..evaluation.report import plot_ood_curves, plot_traces, write_report
 from ..evaluation.run import DEFAULT_TASKS, RunConfig

@@ -26,13 +26,11 @@ import torch
 
 from ..fileio import atomic_write, atomic_write_json, read_json
 from ..observations import nest
+from ..provenance import RENDER_VERSION  # what a rendering holds; its history is there
 from ..actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND, gripper_action, normalized_gripper
 from ..tasks.objects import TWIN_CONTACT_STATE
 from ..tasks.suites import parse_env_id, recorded_env_id
 
-# Bump when what a rendering holds for the same states changes (cameras, shaders, observation
-# keys): renderings of an older version are then rendered again, not reused.
-RENDER_VERSION = 1
 REGENERATE = "delete it and re-run the command that wrote it ('demos generate' resumes, 'demos render' rewrites)"
 
 

@@ -152,7 +152,8 @@ def _task_report(demo_set: DemoSet, task_id: int, seeds: list[int]) -> dict:
     return {"task_id": task_id, "generated": sum(s in qc for s in seeds),
             "accepted": sum(bool(qc.get(s, {}).get("accepted")) for s in seeds), "rejected": rejected,
             "train_seeds": [seeds[0], seeds[-1]] if seeds else None,
-            "seconds_per_demo": float(np.mean([qc[s]["wall_s"] for s in seeds if s in qc])) if qc else None}
+            "seconds_per_demo": float(np.mean(walls)) if (walls := [qc[s]["wall_s"] for s in seeds
+                                                                    if "wall_s" in qc.get(s, {})]) else None}
 
 
 def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1,

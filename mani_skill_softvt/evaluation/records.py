@@ -9,41 +9,23 @@ a record's age.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
 
 from ..fileio import read_jsonl_lines
+from ..provenance import UNHASHED, record_hash, seal  # noqa: F401  (the seal: provenance.py)
 from .run import recorded_camera_size
-
-UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
 
 
 class RecordIntegrityError(ValueError):
     """A stored record that is not what the evaluator wrote (edited, corrupt, or not a record)."""
 
 
-def record_hash(record: dict) -> str:
-    """SHA-256 of the record without its hash and wall time (canonical JSON)."""
-    body = {k: v for k, v in record.items() if k not in UNHASHED}
-    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
-
-
-def seal(record: dict) -> dict:
-    """The record with its ``record_sha256``."""
-    record["record_sha256"] = record_hash(record)
-    return record
-
-
 def migrate_record(record: dict) -> dict:
     """A stored record in today's format (a new dict; the stored one is what its hash covers).
 
-    Fields added since the first records, with what the records before them meant:
-
-    - ``camera_size``: the native 224x224 cameras (none in a state obs mode);
-    - ``tactile_model``: 1, the first gel model, in a ``+tactile`` obs mode (none without);
-    - ``collapsed_steps``: 0; a collapsed tet then ended the episode as ``sim_unstable``;
-    - ``dsr_success``: success with R_max <= 1 (before collapses were counted).
+    The fields added since the first records are filled in with what the records before them meant:
+    the rows of :data:`~mani_skill_softvt.provenance.UPGRADES` for ``evaluation record`` whose ``where``
+    is this function (camera_size, tactile_model, collapsed_steps, dsr_success).
     """
     out = dict(record)
     obs_mode = out.get("obs_mode")

@@ -47,7 +47,7 @@ from ..stack import software_stack
 from ..tasks.suites import get_suite
 from ..version import __version__
 from .protocols import episode_key, protocol_of, reset_options
-from .provenance import sidecar
+from .sidecar import sidecar
 from .records import read_records, seal
 from .run import RunConfig
 from .wrapper import make_env

@@ -79,7 +79,7 @@ def sweep_asset(asset_id: str, asset_index: int, closures, repeats: int, log_pat
         try:
             for g, k in todo:
                 rec = run_trial(env, g, calibration_seed(asset_index, g, k))
-                rec.update(asset_id=asset_id, repeat=k, physics=physics_signature())
+                rec.update(asset_id=asset_id, repeat=k, physics=env.unwrapped.physics.signature())
                 append_jsonl(log_path, rec)
                 if progress is not None:
                     progress(1, None)

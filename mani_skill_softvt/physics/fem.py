@@ -29,6 +29,7 @@ import numpy as np
 from ..assets.materials import SoftMaterial  # noqa: F401  (the material type lives with the assets' materials)
 from ..paths import WARP_CACHE_DIR
 from . import constants as C
+from .config import DEFAULT_PHYSICS, PhysicsConfig
 from .errors import SimulationInstabilityError  # raised here, defined apart for its handlers
 from .sleeping import SLEEP_TICKS, WAKE_MARGIN, box_corners, box_gap, is_quiet, local_bounds, world_boxes
 from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_to_newton
@@ -60,12 +61,10 @@ def _init_warp() -> None:
         os.close(saved)
 
 
-def vbd_schedule(youngs_moduli) -> tuple[int, int]:
+def vbd_schedule(youngs_moduli, physics: PhysicsConfig = DEFAULT_PHYSICS) -> tuple[int, int]:
     """(Newton substeps per tick, VBD iterations per substep) for a world holding bodies of these
-    moduli (Pa). Stiff bodies (hard rubber and up) get more substeps so that pad friction converges
-    (see ``constants.NEWTON_SUBSTEPS_STIFF``)."""
-    stiff = any(float(e) >= C.STIFF_MODULUS for e in youngs_moduli)
-    return (C.NEWTON_SUBSTEPS_STIFF if stiff else C.NEWTON_SUBSTEPS), C.VBD_ITERATIONS
+    moduli (Pa), under ``physics`` (:meth:`PhysicsConfig.vbd_schedule`)."""
+    return physics.vbd_schedule(youngs_moduli)
 
 
 def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
@@ -165,24 +164,32 @@ class SoftBodyWorld:
 
     def __init__(
         self,
-        dt: float = 1.0 / C.SIM_FREQ,
-        substeps: int = C.NEWTON_SUBSTEPS,
-        iterations: int = C.VBD_ITERATIONS,
+        dt: float | None = None,
+        substeps: int | None = None,
+        iterations: int | None = None,
         gravity: float = -9.81,
-        contact_ke: float = C.SOFT_CONTACT_KE,
-        contact_kd: float = C.SOFT_CONTACT_KD,
-        particle_radius: float = C.PARTICLE_RADIUS,
-        contact_gap: float = C.SOFT_CONTACT_GAP,
+        contact_ke: float | None = None,
+        contact_kd: float | None = None,
+        particle_radius: float | None = None,
+        contact_gap: float | None = None,
         use_graph: bool = True,
         device: str = "cpu",
         sleeping: bool = False,
+        physics: PhysicsConfig = DEFAULT_PHYSICS,
     ):
+        """The settings not given are ``physics``'s (its lockstep rate, VBD schedule for soft bodies,
+        contact and friction smoothing)."""
         _init_warp()
-        self.dt = float(dt)
-        self.substeps = int(substeps)
+        self.physics = physics
+        pick = lambda given, default: default if given is None else given  # noqa: E731
+        self.dt = float(pick(dt, 1.0 / physics.sim_freq))
+        self.substeps = int(pick(substeps, physics.newton_substeps))
         self.sub_dt = self.dt / self.substeps
-        self.iterations = int(iterations)
-        self.contact_ke, self.contact_kd = float(contact_ke), float(contact_kd)
+        self.iterations = int(pick(iterations, physics.vbd_iterations))
+        self.contact_ke = float(pick(contact_ke, physics.soft_contact_ke))
+        self.contact_kd = float(pick(contact_kd, physics.soft_contact_kd))
+        particle_radius = pick(particle_radius, physics.particle_radius)
+        contact_gap = pick(contact_gap, physics.soft_contact_gap)
         self.particle_radius = float(particle_radius)
         self.contact_gap = float(contact_gap)
         self.use_graph = use_graph
@@ -336,7 +343,7 @@ class SoftBodyWorld:
         self.solver = newton.solvers.SolverVBD(
             m,
             iterations=self.iterations,
-            friction_epsilon=C.FRICTION_EPSILON,
+            friction_epsilon=self.physics.friction_epsilon,
             integrate_with_external_rigid_solver=True,
             particle_enable_tile_solve=False,  # measured faster on CPU for ~300-node bodies
         )

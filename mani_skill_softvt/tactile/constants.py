@@ -7,6 +7,8 @@ geometry, the gel model and the marker model around it.
 
 from __future__ import annotations
 
+from ..provenance import TACTILE_MODEL_VERSION, TACTILE_SOFT_MODEL_VERSION
+
 # ---------------------------------------------------------------- image / optics geometry
 # Output image 320 x 240 (W x H): half of the Mini's 640 x 480 calibration resolution, small
 # enough for a policy observation and an exact 2x downsample of taxim's calibration frame.
@@ -86,14 +88,9 @@ FLOW_POOL = 4  # px of the grid the markers are computed on
 # outside it: the gel is bonded to the acrylic, so it drags only a margin around the patch.
 SHEAR_DECAY = 12.0  # px (~0.7 mm)
 
-# The tactile model's version. Renderings, baselines trained on them and evaluation records carry
-# it, so that frames of one model are never mixed with another's (data saved without it is 1).
-# 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's outward flow;
-# 3: a rigid twin is touched on the hull PhysX collides, not its tet boundary (which sat outside
-#    the hull: the whole pad read as pressed). Soft objects' frames did not change from 2 to 3,
-#    so a soft scene's frames keep 2 and what was rendered or trained on them stays valid.
-MODEL_VERSION = 3
-SOFT_MODEL_VERSION = 2  # the last version that changed how an FEM surface is rendered
+# The tactile model's version and its history: mani_skill_softvt/provenance.py.
+MODEL_VERSION = TACTILE_MODEL_VERSION
+SOFT_MODEL_VERSION = TACTILE_SOFT_MODEL_VERSION
 
 
 def model_version(deformable: bool) -> int:

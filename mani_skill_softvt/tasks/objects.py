@@ -24,7 +24,8 @@ from ..assets.materials import SoftMaterial
 from ..assets.tetmesh import embed_points, join_meshes, surface_of_tets, vertex_normals
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
-from ..physics.fem import SimulationInstabilityError, SoftBodyWorld, vbd_schedule
+from ..physics.config import DEFAULT_PHYSICS, PhysicsConfig
+from ..physics.fem import SimulationInstabilityError, SoftBodyWorld
 from ..physics.rigid import RigidObject, rigid_nodes
 from . import constants as C
 from . import fingers
@@ -87,9 +88,10 @@ class SceneObjects:
     deformable: bool  # FEM surfaces (the gel's pressure indentation) or rigid bodies (force balance)
     contact_radius: float  # m: how far from a collider face the objects' touching surface rests
 
-    def __init__(self, specs: list[ObjectSpec], scene):
+    def __init__(self, specs: list[ObjectSpec], scene, physics: PhysicsConfig = DEFAULT_PHYSICS):
         self.specs = {s.name: s for s in specs}
         self.scene = scene
+        self.physics = physics  # the env's: its lockstep rate, and for FEM bodies the solver and contact
 
     def connect(self, robot, table, props: list[PropCollider]) -> None:
         """The robot, the table and the props are in the scene: couple the objects to them."""
@@ -180,12 +182,13 @@ class SceneObjects:
         pass
 
 
-def build_objects(specs: list[ObjectSpec], scene, soft_sleep: bool = True) -> SceneObjects:
-    """The scene's objects: all soft (:class:`FEMObjects`) or all rigid twins (:class:`RigidTwins`)."""
+def build_objects(specs: list[ObjectSpec], scene, soft_sleep: bool = True,
+                  physics: PhysicsConfig = DEFAULT_PHYSICS) -> SceneObjects:
+    """The scene's objects under ``physics``: all soft (:class:`FEMObjects`) or all rigid twins (:class:`RigidTwins`)."""
     if len({s.rigid for s in specs}) > 1:
         # One tactile model per frame (gel over an FEM surface, or force balance on a rigid one).
         raise ValueError(f"a scene's objects must be all soft or all rigid twins, got {[(s.name, s.rigid) for s in specs]}")
-    return RigidTwins(specs, scene) if specs[0].rigid else FEMObjects(specs, scene, soft_sleep)
+    return RigidTwins(specs, scene, physics) if specs[0].rigid else FEMObjects(specs, scene, soft_sleep, physics)
 
 
 # The env-state key of a twin scene's last-tick contact wrenches (RigidTwins below).
@@ -205,8 +208,8 @@ class RigidTwins(SceneObjects):
     contact_radius = 0.0
     STATE_KEY = TWIN_CONTACT_STATE
 
-    def __init__(self, specs: list[ObjectSpec], scene):
-        super().__init__(specs, scene)
+    def __init__(self, specs: list[ObjectSpec], scene, physics: PhysicsConfig = DEFAULT_PHYSICS):
+        super().__init__(specs, scene, physics)
         self.bodies = {spec.name: self._build(spec, k) for k, spec in enumerate(specs)}
         self.robot = None
         self._restored_wrenches: np.ndarray | None = None  # (len(FEEDBACK_LINKS), 6), until the next tick
@@ -249,7 +252,8 @@ class RigidTwins(SceneObjects):
         # Settle in PhysX too (a faceted ball placed on a vertex would roll away otherwise),
         # with the robot held at its reset joint state.
         qpos, qvel = robot.get_qpos().clone(), robot.get_qvel().clone()
-        ticks, max_ticks, min_ticks = 0, int(max_time * C.SIM_FREQ), C.SIM_FREQ // 10
+        freq = self.physics.sim_freq
+        ticks, max_ticks, min_ticks = 0, int(max_time * freq), freq // 10
         while True:
             self.before_sim_step()
             self.scene.step()
@@ -277,7 +281,7 @@ class RigidTwins(SceneObjects):
             restored = dict(zip(fingers.FEEDBACK_LINKS, self._restored_wrenches))
             return {name: restored[name].copy() for name in links}
         contacts = self.scene.px.get_contacts()
-        dt = 1.0 / C.SIM_FREQ
+        dt = 1.0 / self.physics.sim_freq
         links_map = self.robot.links_map
         out = {}
         for name in links:
@@ -326,10 +330,10 @@ class FEMObjects(SceneObjects):
     """FEM soft bodies in a Newton world, stepped in lockstep with SAPIEN; drawn deformed."""
 
     deformable = True
-    contact_radius = PC.PARTICLE_RADIUS
-
-    def __init__(self, specs: list[ObjectSpec], scene, sleeping: bool = True):
-        super().__init__(specs, scene)
+    def __init__(self, specs: list[ObjectSpec], scene, sleeping: bool = True,
+                 physics: PhysicsConfig = DEFAULT_PHYSICS):
+        super().__init__(specs, scene, physics)
+        self.contact_radius = physics.particle_radius
         self.sleeping = sleeping
         self.boundary = {n: surface_of_tets(s.tets) for n, s in self.specs.items()}  # what the gel touches
         self.index = {s.name: i for i, s in enumerate(specs)}  # Newton body index
@@ -352,21 +356,22 @@ class FEMObjects(SceneObjects):
         """The Newton world: one tet body per object, colliders mirrored from the finger pads, the
         hand, the table top and every prop that declares a collider."""
         soft = list(self.specs.values())
-        substeps, iterations = vbd_schedule(s.material.youngs_modulus for s in soft)
-        world = SoftBodyWorld(substeps=substeps, iterations=iterations, sleeping=self.sleeping)
+        substeps, iterations = self.physics.vbd_schedule(s.material.youngs_modulus for s in soft)
+        world = SoftBodyWorld(substeps=substeps, iterations=iterations, sleeping=self.sleeping, physics=self.physics)
         for spec in soft:
             world.add_soft_body(spec.name, spec.vertices, spec.tets, spec.material, pose=np.array([0, 0, -1.0, 1, 0, 0, 0]))
         bodies = []
         robot_links = {link.name: link._objs[0] for link in robot.get_links()}
         for side, name in fingers.FINGER_LINKS.items():
             world.add_collider_box(name, C.FINGERTIP_HALF_EXTENTS, local_pose=fingers.fingertip_box_pose(side),
-                                   friction=PC.FINGER_FRICTION, movable=True)
+                                   friction=self.physics.finger_friction, movable=True)
             bodies.append(MirroredBody(name, robot_links[name], feedback=True))
         hand = fingers.HAND_LINK
-        world.add_collider_convex(hand, [fingers.hand_collision_hull()], friction=PC.FINGER_FRICTION, movable=True)
+        world.add_collider_convex(hand, [fingers.hand_collision_hull()], friction=self.physics.finger_friction,
+                                  movable=True)
         bodies.append(MirroredBody(hand, robot_links[hand], feedback=True))
         he = C.TABLE_HALF_EXTENTS
-        world.add_collider_box("table", he, local_pose=np.array([0, 0, -he[2], 1, 0, 0, 0]), friction=PC.TABLE_FRICTION)
+        world.add_collider_box("table", he, local_pose=np.array([0, 0, -he[2], 1, 0, 0, 0]), friction=self.physics.table_friction)
         bodies.append(MirroredBody("table", table._bodies[0], feedback=False))
         for prop in props:
             if prop.boxes:
@@ -384,14 +389,15 @@ class FEMObjects(SceneObjects):
     def place(self, name: str, pose: np.ndarray) -> None:
         p = np.asarray(pose, dtype=np.float64).copy()
         # Spawn a hair above the support so the object settles onto it instead of starting in contact.
-        p[2] += PC.PARTICLE_RADIUS + PC.SPAWN_CLEARANCE
+        p[2] += self.physics.particle_radius + PC.SPAWN_CLEARANCE
         self.world.set_soft_body_pose(self.index[name], p)
         self.coupling.teleport()
 
     def settle(self, speed: float, max_time: float, robot) -> dict:
         # Newton only: the robot is frozen because SAPIEN does not step.
         world = self.world
-        ticks, max_ticks, min_ticks = 0, int(max_time * C.SIM_FREQ), C.SIM_FREQ // 10
+        freq = self.physics.sim_freq
+        ticks, max_ticks, min_ticks = 0, int(max_time * freq), freq // 10
         while True:
             world.step()
             world.damp_velocities(C.SETTLE_VELOCITY_DAMPING)

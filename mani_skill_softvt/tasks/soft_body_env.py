@@ -50,6 +50,7 @@ from ..tactile.geometry import contact_polygons, polygons_mask
 from ..tactile.sensor import world_to_pad
 from . import constants as C
 from . import fingers
+from ..physics.config import DEFAULT_PHYSICS
 from .objects import ObjectSpec, PropCollider, SceneObjects, build_objects  # noqa: F401  (specs: the tasks' API)
 from .robot import PandaSoftVT, validate_action  # noqa: F401  (PandaSoftVT: registers the agent)
 from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
@@ -70,7 +71,7 @@ class SoftBodyEnv(BaseEnv):
     agent: PandaSoftVT
 
     def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, soft_sleep: bool = True,
-                 **kwargs):
+                 physics: dict | None = None, **kwargs):
         if kwargs.get("num_envs", 1) != 1:
             raise ValueError(
                 "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
@@ -94,6 +95,10 @@ class SoftBodyEnv(BaseEnv):
         self._tactile: dict[str, GelSight] = {}  # side -> sensor, created with the scene's sensors
         self._skip_cameras = False  # set for one step by skip_cameras_next_step()
         self.settle_info: dict = {}
+        # The physics settings (physics/config.py), the package's with ``physics``'s overrides: plain
+        # values, so ManiSkill records them with the env's kwargs. What the FEM world, the objects and the
+        # lockstep rate read; nothing patches module constants.
+        self.physics = DEFAULT_PHYSICS.with_overrides(physics)
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
         self._lights, self._ambient = [], None  # the scene's lights at nominal intensity (set when loaded)
@@ -107,7 +112,7 @@ class SoftBodyEnv(BaseEnv):
     @property
     def _default_sim_config(self):
         # Lockstep rate: SAPIEN and Newton both at SIM_FREQ (see physics.coupling).
-        return SimConfig(sim_freq=C.SIM_FREQ, control_freq=C.CONTROL_FREQ)
+        return SimConfig(sim_freq=self.physics.sim_freq, control_freq=C.CONTROL_FREQ)
 
     @property
     def _default_sensor_configs(self):
@@ -231,7 +236,7 @@ class SoftBodyEnv(BaseEnv):
         self.table = b.build_kinematic(name="table")
         specs = self._object_specs()
         self._props = self._load_props(options)
-        self.objects = build_objects(specs, self.scene, soft_sleep=self.soft_sleep)
+        self.objects = build_objects(specs, self.scene, soft_sleep=self.soft_sleep, physics=self.physics)
 
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
@@ -434,7 +439,7 @@ class SoftBodyEnv(BaseEnv):
         """
         name = self.object_names[self._index(name)]
         self.objects.place(name, pose)
-        self.objects.run_free(int(round(settle_time * C.SIM_FREQ)))
+        self.objects.run_free(int(round(settle_time * self.physics.sim_freq)))
         self.objects.update_render()
 
     @property

@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 
 from mani_skill_softvt.evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
 from mani_skill_softvt.evaluation.protocols import episode_key, seed_key
-from mani_skill_softvt.evaluation.provenance import machine, numerics, sidecar
+from mani_skill_softvt.evaluation.sidecar import machine, numerics, sidecar
 from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.report import rt_series
 from mani_skill_softvt.evaluation.run import policy_tag

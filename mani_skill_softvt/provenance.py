@@ -1,0 +1,152 @@
+"""Provenance: what this package's files are stamped with, and what an older file lacks.
+
+One place for every version marker a file carries, the seal of an evaluation record, the
+comparison of a recorded physics signature, and :data:`UPGRADES`, the table of what a file from
+an earlier version lacks, how it is read, and what to do about it. The code that reads a file
+takes its markers and its remedies from here; the markers' histories are written here once.
+
+Computed elsewhere, named here: the physics signature is :meth:`~mani_skill_softvt.physics.config.PhysicsConfig.signature`
+(the settings of an env, with :data:`EE_ORIENTATION_AXIS_ANGLE`); the software stack and machine a
+record ran on are :mod:`mani_skill_softvt.stack`, its numerics :mod:`mani_skill_softvt.numerics`; what is
+known of sealed records that predate those is the sidecar of :mod:`mani_skill_softvt.evaluation.sidecar`.
+The campaign's own markers (``FEATURES_VERSION``, ``CACHE_FORMAT``) live with its data cache.
+
+Imports nothing of the package: everything that writes or reads a file may import it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+
+# ------------------------------------------------------------------ version markers
+
+# The gripper actions' encoding, recorded in every trajectory file's env kwargs and in a demo set's
+# manifest (``gripper_action_version``). 1 (files without it): the closure in [0, 1] in every mode;
+# 2: ManiSkill's normalised action in [-1, 1] (1 open) in the joint and delta modes, the closure in
+# pd_ee_pose (the paper's mode, whose files never changed).
+GRIPPER_ACTION_VERSION = 2
+UPGRADE_COMMAND = "python -m mani_skill_softvt.replay --upgrade-gripper"
+GRIPPER_ACTION_VERSIONS = {  # why an older version is refused; {path}: the file
+    1: "its joint- or delta-mode gripper actions are closures in [0, 1] (written before mani_skill_softvt used "
+       "ManiSkill's normalised gripper action in [-1, 1] in those modes); convert the file in place with "
+       f"`{UPGRADE_COMMAND} {{path}}`, then run this again",
+}
+
+# The tactile model. Renderings, baselines trained on them and evaluation records carry it
+# (``tactile_model``), so that frames of one model are never mixed with another's (data saved
+# without it is 1). 1: FOTS-style dilation (the slope of the blurred indentation); 2: the gel's
+# outward flow; 3: a rigid twin is touched on the hull PhysX collides, not its tet boundary (which
+# sat outside the hull: the whole pad read as pressed). Soft objects' frames did not change from 2
+# to 3, so a soft scene's frames keep 2 and what was rendered or trained on them stays valid.
+TACTILE_MODEL_VERSION = 3
+TACTILE_SOFT_MODEL_VERSION = 2  # the last version that changed how an FEM surface is rendered
+
+# What a rendering holds for the same states (cameras, shaders, observation keys), recorded per
+# rendered episode (``render_version``; absent: 1). Bump it to have older renderings rendered again.
+RENDER_VERSION = 1
+
+# How the hand's orientation in a pd_ee_pose action is read: 1.0 the axis-angle the paper means
+# (tasks.robot.AxisAnglePoseController). Not a physical setting: a history marker in the physics
+# signature. Cards and demos made while ManiSkill's controller read it as XYZ Euler angles (a
+# scripted grasp at 20 deg of yaw then came down tilted by ~30 deg) lack it, and are refused as
+# made under other physics.
+EE_ORIENTATION_AXIS_ANGLE = 1.0
+
+# ------------------------------------------------------------------ the seal of a record
+
+UNHASHED = ("record_sha256", "wall_s")  # wall time differs run to run; everything else must not
+
+
+def record_hash(record: dict) -> str:
+    """SHA-256 of an evaluation record without its hash and wall time (canonical JSON)."""
+    body = {k: v for k, v in record.items() if k not in UNHASHED}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
+def seal(record: dict) -> dict:
+    """The record with its ``record_sha256``."""
+    record["record_sha256"] = record_hash(record)
+    return record
+
+
+# ------------------------------------------------------------------ the physics signature
+
+def signature_differences(recorded, now: dict) -> list[str]:
+    """Human-readable differences between a recorded physics signature and ``now``."""
+    if not isinstance(recorded, dict):
+        return ["no physics signature recorded (made before signatures existed)"]
+    return [f"{k}: recorded {recorded.get(k)!r}, now {v!r}" for k, v in now.items() if recorded.get(k) != v]
+
+
+# ------------------------------------------------------------------ what older files lack
+
+@dataclass(frozen=True)
+class Upgrade:
+    """One thing a file from an earlier version lacks: which file (``file``), what (``lacks``), how
+    this version reads such a file (``read_as``: a default, or refused), what to do (``remedy``),
+    and where the code that does it lives (``where``, module:function, checked by the tests)."""
+
+    file: str
+    lacks: str
+    read_as: str
+    remedy: str
+    where: str
+
+
+REGENERATE_DEMOS = "record the demos again: python -m mani_skill_softvt.demos generate (it records the seeds the QC logs list)"
+RERENDER = "render again: python -m mani_skill_softvt.demos render (it renders what is not current)"
+RECALIBRATE = "calibrate again: python -m mani_skill_softvt.calibrate --restart --assets ASSET"
+
+UPGRADES = (
+    # Evaluation records: sealed, so never rewritten; filled in as they are read.
+    Upgrade("evaluation record", "camera_size", "the native 224x224 cameras (none in a state obs mode)", "none needed",
+            "mani_skill_softvt.evaluation.records:migrate_record"),
+    Upgrade("evaluation record", "tactile_model", "1 in a +tactile obs mode (none without); so never resumed by "
+            "today's runs, whose frames are another model", "none needed", "mani_skill_softvt.evaluation.records:migrate_record"),
+    Upgrade("evaluation record", "collapsed_steps", "0 (a collapsed tet then ended the episode as sim_unstable)",
+            "none needed", "mani_skill_softvt.evaluation.records:migrate_record"),
+    Upgrade("evaluation record", "dsr_success", "success with R_max <= 1", "none needed",
+            "mani_skill_softvt.evaluation.records:migrate_record"),
+    Upgrade("evaluation record", "policy_sha256", "belongs to the run of the file it names", "none needed",
+            "mani_skill_softvt.evaluation.runner:is_run_record"),
+    Upgrade("evaluation record", "instructed_instance, other_in_target, instance_displacement (Spatial)",
+            "not compared on reproduction; no instance outcome", "none needed",
+            "mani_skill_softvt.evaluation.metrics:instance_outcomes"),
+    Upgrade("evaluation record", "receipt.numerics", "the sidecar's numerics, else the CPU's legacy numerics, else "
+            "native; replayed so", "a provenance.json sidecar beside the records",
+            "mani_skill_softvt.numerics:numerics_of"),
+    Upgrade("evaluation record", "receipt.stack (or keys of it)", "unrecorded: not a difference on reproduction",
+            "a provenance.json sidecar beside the records", "mani_skill_softvt.stack:stack_differences"),
+    # Demonstration files.
+    Upgrade("trajectory .json", "gripper_action_version (1)", "refused in the joint and delta modes",
+            f"convert in place: {UPGRADE_COMMAND} FILE.h5", "mani_skill_softvt.data.trajectory:gripper_action_problem"),
+    Upgrade("demo manifest.json", "gripper_action_version (1)", "refused in the joint and delta modes",
+            f"convert each task<k>.h5 with {UPGRADE_COMMAND} and set the manifest's version",
+            "mani_skill_softvt.demonstrations.generate:generate"),
+    Upgrade("demo manifest.json", "physics (or a key of it)", "refused: made under other physics",
+            "generate into another --out", "mani_skill_softvt.demonstrations.generate:generate"),
+    Upgrade("demo manifest.json", "numerics", "accepted with a note: recorded before the pins",
+            "none needed (new episodes run under today's numerics)", "mani_skill_softvt.demonstrations.generate:generate"),
+    Upgrade("trajectory .h5", "traj_<i> groups", "refused as corrupt", REGENERATE_DEMOS,
+            "mani_skill_softvt.data.trajectory:read_episode"),
+    Upgrade("trajectory .h5 (rigid twins)", "env_states/contact_wrenches", "refused for touch: a restored twin "
+            "would show a blank gel", REGENERATE_DEMOS, "mani_skill_softvt.data.trajectory:holds_twin_contact"),
+    Upgrade("env state (rigid twins)", "soft (FEM values)", "refused: recorded before the twins became rigid",
+            REGENERATE_DEMOS, "mani_skill_softvt.tasks.objects:RigidTwins"),
+    Upgrade("rendering .h5", "tactile_model", "1, so not current for today's frames", RERENDER,
+            "mani_skill_softvt.data.trajectory:tactile_model_of"),
+    Upgrade("rendering .h5", "render_version, states_sha256, the tactile depth map", "not current", RERENDER,
+            "mani_skill_softvt.data.trajectory:rendering_current"),
+    # Calibration.
+    Upgrade("calibration card", "physics (or EE_ORIENTATION_AXIS_ANGLE)", "refused: made under other physics",
+            RECALIBRATE, "mani_skill_softvt.calibration.cards:load_calibration_card"),
+    Upgrade("calibration sweep log", "physics of a trial", "refused: trials under other physics", RECALIBRATE,
+            "mani_skill_softvt.expert.calibration_trials:sweep_asset"),
+)
+
+
+def upgrades_of(file: str) -> list[Upgrade]:
+    """The rows of :data:`UPGRADES` for one kind of file."""
+    return [u for u in UPGRADES if u.file == file]
