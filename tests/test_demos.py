@@ -131,6 +131,55 @@ def test_screening_grows_the_qc_log_without_recording_again_what_it_lists(tmp_pa
     assert "on this machine: 1 of the 2 accepted episodes" in format_stats(summary)
 
 
+def test_a_committed_accepted_demo_is_recorded_again_as_its_qc_log_says(tmp_path):
+    """Under the pinned numerics a seed's demo is the same episode on any machine: the first
+    accepted seed of the committed Spatial-Rigid task 3 (recorded under the pins in an earlier
+    session) is recorded again with the step count and the R_max (to the bit)
+    its committed QC log line holds; the expert's settle (below) left it as it was. (The Object sets
+    predate the pins: their manifests name no numerics, and their bits are their machine's.)"""
+    from mani_skill_softvt.data.demo_set import DemoSet
+    from mani_skill_softvt.demonstrations.generate import record_demo
+    from mani_skill_softvt.evaluation.wrapper import make_env
+    from mani_skill_softvt.paths import REPO_DIR
+
+    demos = DemoSet(REPO_DIR / "demos", "spatial_rigid")
+    assert json.loads(demos.manifest.read_text())["numerics"] == "x86-64-v3"
+    line = next(q for q in demos.verdicts(3) if q["accepted"])
+    env = make_env("spatial_rigid", 3, obs_mode="none", control_mode="pd_ee_pose")
+    try:
+        problems, ep = record_demo(env, line["seed"], tmp_path / "ep.h5", line["planner"])
+    finally:
+        env.close()
+    assert problems == [] and len(ep["actions"]) == line["steps"]
+    assert float(np.max(ep["evaluator"]["deformation_ratio"])) == line["r_max"]
+
+
+@pytest.mark.slow  # a Spatial-Soft demo: about a minute of physics; CI runs it (-m slow)
+def test_a_plan_that_ends_with_the_object_still_moving_holds_until_it_rests():
+    """Spatial-Soft task 9's pastry rocks on the plate after the release on some seeds: its first
+    training seed's plan ends with the object in the target but not at rest. The expert holds its
+    last pose until the object rests (at most SETTLE_STEPS ticks), so the demo ends in success
+    instead of being rejected; success then ends the episode, as it does in evaluation."""
+    from mani_skill_softvt.data.seeds import train_seed
+    from mani_skill_softvt.demonstrations.generate import record_demo
+    from mani_skill_softvt.evaluation.wrapper import make_env
+    from mani_skill_softvt.expert.solution import SETTLE_STEPS
+
+    import tempfile
+    from pathlib import Path
+
+    env = make_env("spatial_soft", 9, obs_mode="none", control_mode="pd_ee_pose")
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            problems, ep = record_demo(env, train_seed(9, 0), Path(d) / "ep.h5", "mplib")
+    finally:
+        env.close()
+    success = np.asarray(ep["success"], dtype=bool)
+    assert problems == [] and success[-1] and not success[-2], (problems, success[-5:])
+    plan_end = int(np.flatnonzero(~success[:-1])[-1]) + 1  # the settle ran from the plan's end at most
+    assert len(success) - plan_end <= SETTLE_STEPS
+
+
 @pytest.mark.slow  # about a minute of physics or training on 2 cores; CI runs it (-m slow)
 def test_accepted_mode_draws_seeds_in_order_until_enough_demos_are_accepted(tmp_path, capsys):
     """A task whose expert fails on a seed still ends with the demos asked for: the rejected seed
