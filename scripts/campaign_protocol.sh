@@ -10,7 +10,8 @@
 #    minutes are spent (run again to continue; nothing below runs before training ends);
 # 2. exports the policy to baselines/policies/[SUITE/]NAME.pt (float16, at most 20 MiB; left as it is
 #    if already exported from the same policy, so its records stay reproducible);
-# 3. evaluates it on SUITE's ID protocol, 50 episodes per task (resumable), into baselines/results/;
+# 3. evaluates it on SUITE's ID protocol, PER_TASK episodes per task (default 50, all of them; the
+#    pre-registered design scores extra training seeds on the first 25), resumable, into baselines/results/;
 # 4. writes the report beside the paper's numbers (both Object suites, so a rigid-twin variant is
 #    paired with its soft one), the old-physics rows kept apart.
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
@@ -35,7 +36,7 @@ if [ ! -f "$run/policy.pt" ]; then
 fi
 mkdir -p "$(dirname "$policy")"
 "$PY" -m softvt_campaign.baselines.export "$run/policy.pt" "$policy" --if-changed
-"$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task 50 \
+"$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task "${PER_TASK:-50}" \
   --workers "$WORKERS" --out baselines/results
 shopt -s nullglob
 "$PY" -m softvt_campaign.studies.results baselines/results/object_soft_id_*.jsonl \

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# One training of the seed-level and Spatial campaigns (docs/baselines.md, "The seed-level and Spatial
+# campaigns"), planned for a session whose machine keeps nothing from the last one:
+#   bash scripts/campaign_session.sh SUITE VARIANT NAME [SEED=0] [PER_TASK=50]
+#   bash scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25    # an extra seed, the pre-registered 250
+#   bash scripts/campaign_session.sh spatial_rigid vo-c vo-c-cpu 0 50         # a Spatial policy's seed 0, all 500
+# 1. SUITE's demo set, as its committed QC logs list it, recorded again (the same episodes, bit for
+#    bit, under the pinned numerics), merged and rendered at 84 px, on both cores: about 16 + 60 min
+#    for a rigid suite on a new machine, nothing where the store already holds it;
+# 2. VARIANT trained with the committed policies' recipe (noaug, 24,000 steps) and seed SEED into
+#    $SOFTVT_RUNS_DIR, exported to baselines/policies/SUITE/NAME.pt (commit it as soon as it is
+#    there: a training outlives a session only as its exported policy), then scored on PER_TASK ID
+#    episodes of each task into baselines/results/ (resumable: run the same command again).
+# A rigid suite's VO training (75 min on one core) fits one session after its demos; a soft suite's
+# demos alone take about two hours of both cores, so its trainings wait for a machine that keeps the
+# stores between sessions. Run it from a worktree at a fixed commit, e.g.
+#   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
+#     scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25 > /work/lane-session.log 2>&1 &
+set -euo pipefail
+cd "$(dirname "$0")/.."
+(( $# >= 3 )) || { echo "usage: $0 SUITE VARIANT NAME [SEED=0] [PER_TASK=50]" >&2; exit 2; }
+SUITE=$1; VARIANT=$2; NAME=$3; SEED=${4:-0}; PER_TASK=${5:-50}
+export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
+export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
+export PY=${PY:-.venv/bin/python}
+printf '\n[campaign session] %s  %s demos: recorded again, merged, rendered (two workers)\n' "$(date -u +%H:%M:%S)" "$SUITE"
+SUITE=$SUITE bash scripts/campaign_demos.sh 100 2
+printf '\n[campaign session] %s  %s %s seed %s: train, export, %s ID episodes a task\n' "$(date -u +%H:%M:%S)" \
+  "$SUITE" "$VARIANT" "$SEED" "$PER_TASK"
+SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED" bash scripts/campaign_protocol.sh "$VARIANT" noaug 1 100000 "$NAME"
+printf '\n[campaign session] %s  done\n' "$(date -u +%H:%M:%S)"
