@@ -18,6 +18,9 @@
 # whole set (the same bits under the pinned numerics), merges and renders it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 NUM=${1:-100}; WORKERS=${2:-1}; ROUND=${3:-10}; MAX_SEEDS=${4:-250}
 (( NUM > 0 && WORKERS > 0 && ROUND > 0 && MAX_SEEDS >= NUM )) || {
   echo "usage: $0 [ACCEPTED>0] [WORKERS>0] [ROUND>0] [MAX_SEEDS>=ACCEPTED]" >&2; exit 2; }
@@ -51,10 +54,10 @@ trap sync_back EXIT
 generate() {  # ACCEPTED [generate's other flags]
   local k=$1; shift
   "$PY" -m mani_skill_softvt.demos generate --suite "$SUITE" --accepted "$k" --num "$MAX_SEEDS" --out "$SOFTVT_DEMOS_DIR" \
-    ${SCREEN_ONLY:+--screen-only} "$@"
+    $([ "${SCREEN_ONLY:-0}" = 1 ] && echo --screen-only) "$@"
 }
 render() {  # [render's other flags]
-  if [ "${RENDER_SIZE:-84x84}" != none ] && [ -z "${SCREEN_ONLY:-}" ]; then
+  if [ "${RENDER_SIZE:-84x84}" != none ] && [ "${SCREEN_ONLY:-0}" != 1 ]; then
     "$PY" -m mani_skill_softvt.demos render --suite "$SUITE" --obs-mode rgb+tactile --camera-size "${RENDER_SIZE:-84x84}" \
       --out "$SOFTVT_DEMOS_DIR" "$@"
   fi

@@ -23,6 +23,9 @@
 # study that docs/findings.md cites, and runs two workers (one per policy) for its few minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 LANE=${1:-}
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}

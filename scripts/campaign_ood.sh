@@ -10,6 +10,9 @@
 # 3. the report: baselines/results/ood.md, ood.json, ood_curves.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 WORKERS=${1:-1}
 read -r -a policies <<< "${2:-vo-c-cpu vt-c-cpu}"
 PY=${PY:-.venv/bin/python}

@@ -18,6 +18,9 @@
 # Object-Soft runs keep the unprefixed paths they were made with.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 VARIANT=${1:-vo-c}; RECIPE=${2:-base}; WORKERS=${3:-1}; BUDGET=${4:-150}
 NAME=${5:-$VARIANT-cpu$([ "$RECIPE" = base ] || echo "-$RECIPE")}
 SUITE=${SUITE:-object_soft}

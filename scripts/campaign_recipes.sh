@@ -10,6 +10,9 @@
 # every recipe (runs named <variant>-<recipe>+key=value).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 VARIANT=${1:-vo-c}; BUDGET=${2:-150}; shift $(( $# < 2 ? $# : 2 ))
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}

@@ -18,13 +18,16 @@
 #     scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25 > /work/lane-session.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 (( $# >= 3 )) || { echo "usage: $0 SUITE VARIANT NAME [SEED=0] [PER_TASK=50]" >&2; exit 2; }
 SUITE=$1; VARIANT=$2; NAME=$3; SEED=${4:-0}; PER_TASK=${5:-50}
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 export PY=${PY:-.venv/bin/python}
 printf '\n[campaign session] %s  %s demos: recorded again, merged, rendered (two workers)\n' "$(date -u +%H:%M:%S)" "$SUITE"
-SUITE=$SUITE bash scripts/campaign_demos.sh 100 2
+SCREEN_ONLY=0 HELP_FROM_LAST= RENDER_SIZE=84x84 SUITE=$SUITE bash scripts/campaign_demos.sh 100 2
 printf '\n[campaign session] %s  %s %s seed %s: train, export, %s ID episodes a task\n' "$(date -u +%H:%M:%S)" \
   "$SUITE" "$VARIANT" "$SEED" "$PER_TASK"
 SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED" bash scripts/campaign_protocol.sh "$VARIANT" noaug 1 100000 "$NAME"

@@ -15,6 +15,9 @@
 #     scripts/campaign_spatial.sh > /work/lane-spatial.log 2>&1 &
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
+# softvt_campaign points there) must train, export and study with the code of the commit it runs.
+export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export PY=${PY:-.venv/bin/python}
 mkdir -p "$SOFTVT_DEMOS_DIR"

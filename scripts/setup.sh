@@ -98,8 +98,10 @@ else
   # that runs on the CPU, about 5 GB installed.
   "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" "lerobot[dataset,training,diffusion]==0.6.1" -e ".[dev]"
   "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e plugins/lerobot_env_softvt
+  # The campaign too (LeRobot brings diffusers): its tests and the committed policy files run on this stack.
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e campaign
   echo "$want" > "$stamp"
-  log "installed LeRobot 0.6.1, the package and its plugin into $VENV"
+  log "installed LeRobot 0.6.1, the package, its plugin and the campaign into $VENV"
 fi
 
 # ---------------------------------------------------------------- 3. Warp kernel cache

@@ -210,7 +210,7 @@ def _package_graph() -> dict[str, set[str]]:
 def test_no_package_imports_itself_back():
     """The packages form layers: assets below physics (the FEM reads the materials), the
     calibration cards and their statistics below the tasks that read them; what drives the
-    simulator to calibrate sits above (calibrate.py, expert/grasp_script.py)."""
+    simulator to calibrate sits above (expert/calibration_trials.py, expert/grasp_script.py)."""
     graph = _package_graph()
     assert _cycles(graph) == []
     assert "physics" not in graph["assets"]

@@ -141,3 +141,19 @@ def test_a_records_file_holds_one_numerics_and_resuming_it_under_others_is_refus
     path.write_text(json.dumps(old) + "\n")
     with pytest.raises(ValueError, match="made under numerics native.*SOFTVT_NUMERICS=native"):
         evaluate(run, path)
+
+
+def test_a_campaign_command_run_on_its_own_runs_under_the_pins():
+    """softvt-train and python -m softvt_campaign... import the campaign first: it imports the library
+    before numpy or torch, so the pins hold there too."""
+    import subprocess
+    import sys
+
+    code = ("import softvt_campaign.baselines.train\n"
+            "from mani_skill_softvt.numerics import resolved\n"
+            "r = resolved(); print(r['pinned'], r['loaded_before_pin'])")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("SOFTVT_NUMERICS", "ATEN_", "OPENBLAS_", "NPY_",
+                                                                      "MKL_", "ONEDNN_", "DNNL_", "OPENCV_", "LP_"))}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split()[0] == "True", out.stdout

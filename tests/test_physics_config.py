@@ -47,3 +47,15 @@ def test_an_env_runs_its_fem_world_under_the_physics_it_was_given():
             env.close()
     assert worlds[0] == (2, 1e-3, 0.9, DEFAULT_PHYSICS.particle_radius, False)
     assert worlds[1] == (4, DEFAULT_PHYSICS.friction_epsilon, 1.2, DEFAULT_PHYSICS.particle_radius, True)
+
+
+def test_a_card_made_under_other_physics_than_the_envs_is_refused():
+    """An env built with physics overrides scores DSR only with cards calibrated under them: the
+    committed cards (the package's physics) are refused for it, naming the setting."""
+    from mani_skill_softvt.calibration.cards import load_calibration_card
+
+    assert load_calibration_card(ASSET_IDS[0]).g_max > 0  # the package's physics: accepted
+    with pytest.raises(ValueError, match="other physics.*NEWTON_SUBSTEPS: recorded 4.0, now 2.0"):
+        load_calibration_card(ASSET_IDS[0], physics=DEFAULT_PHYSICS.with_overrides(newton_substeps=2))
+    with pytest.raises(TypeError, match="give a dict of overrides"):
+        gym.make("SoftGraspLift-v1", obs_mode="state", asset_id=ASSET_IDS[0], physics=DEFAULT_PHYSICS)

@@ -11,6 +11,7 @@ from pathlib import Path
 from ..version import __version__
 from ..fileio import atomic_write_json, read_json
 from ..paths import CALIBRATION_DIR, missing_data_hint
+from ..physics.config import DEFAULT_PHYSICS, PhysicsConfig
 from ..physics.constants import physics_signature, signature_mismatch
 from . import protocol as P
 from .stats import gripper_envelope
@@ -36,9 +37,9 @@ def make_card(asset_id: str, records: list[dict], percentile: float, closures, r
                      "jitter_xy_mm": 1e3 * P.JITTER_XY, "jitter_yaw_deg": float(P.JITTER_YAW * 180 / 3.141592653589793),
                      "env": "SoftGraspLift-v1", "control_mode": "pd_ee_pose"},
         "package_version": __version__,
-        # The sweep refused trials from other physics, so the records share the current signature:
-        # kept once here, and checked whenever the card is loaded.
-        "physics": physics_signature(),
+        # The sweep refused trials from other physics, so the records share one signature (the env's
+        # they ran in): kept once here, and checked whenever the card is loaded.
+        "physics": next((r["physics"] for r in records if "physics" in r), physics_signature()),
         "records": [{k: v for k, v in r.items() if k != "physics"} for r in records],
     }
 
@@ -109,12 +110,13 @@ class CalibrationCard:
         return gripper_envelope(list(self.records), percentile)
 
 
-def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR, check_physics: bool = True) -> CalibrationCard:
+def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR, check_physics: bool = True,
+                          physics: PhysicsConfig = DEFAULT_PHYSICS) -> CalibrationCard:
     """The calibration card of a deformable asset; clear errors when it is missing or malformed.
 
-    With ``check_physics`` (the default) a card calibrated under other physics constants is
-    refused: its envelope and tau_o would not describe the objects being simulated. Benchmarks
-    that vary the physics on purpose pass ``False``.
+    With ``check_physics`` (the default) a card calibrated under other physics than ``physics`` (the
+    env's; default the package's) is refused: its envelope and tau_o would not describe the objects
+    being simulated. Benchmarks that vary the physics on purpose pass ``False``.
     """
     path = card_path(asset_id, directory)
     if not path.exists():
@@ -128,7 +130,7 @@ def load_calibration_card(asset_id: str, directory: Path = CALIBRATION_DIR, chec
     card = CalibrationCard.from_dict(data, f"calibration card {path}")
     if card.asset_id != asset_id:
         raise ValueError(f"calibration card {path} describes '{card.asset_id}', expected '{asset_id}'; {_RECALIBRATE}")
-    stale = signature_mismatch(data.get("physics")) if check_physics else []
+    stale = signature_mismatch(data.get("physics"), physics) if check_physics else []
     if stale:
         raise ValueError(f"calibration card {path} was made under other physics ({'; '.join(stale)}); its envelope "
                          f"and tau_o do not hold for the objects simulated now: re-run the calibration "

@@ -101,11 +101,17 @@ def main(argv=None) -> dict:
         run = resolve(args.obs_mode)
         # No --obs-mode: a run the records file holds in another mode (made when the default was
         # another) is resumed in its mode, not started again beside it.
-        modes = set() if args.obs_mode else recorded_obs_modes(args.out / f"{run.stem}.jsonl", run)
+        records_file = args.out / f"{run.stem}.jsonl"
+        modes = set() if args.obs_mode else recorded_obs_modes(records_file, run)
         if len(modes) == 1 and run.obs_mode not in modes:
-            run = resolve(modes.pop())
-            print(f"note: resuming the run {args.out / f'{run.stem}.jsonl'} holds, in obs mode {run.obs_mode} "
-                  "(give --obs-mode to start another run)")
+            try:  # only a run this policy can run in that mode, and whose records it would resume
+                recorded = resolve(next(iter(modes)))
+            except (ValueError, FileNotFoundError):
+                recorded = None
+            if recorded is not None and run_records(records_file, recorded):
+                run = recorded
+                print(f"note: resuming the run {records_file} holds, in obs mode {run.obs_mode} "
+                      "(give --obs-mode to start another run)")
     except (ValueError, FileNotFoundError) as e:
         ap.error(str(e))
     if args.workers < 1:

@@ -160,7 +160,7 @@ def resolve_policy(spec: str) -> PolicySource:
     registered = [n for n, k in _registered_kinds() if not isinstance(k, Exception)]
     raise ValueError(f"policy '{spec}' is neither built in ({sorted(BUILTIN)}), module:Class, ws://HOST:PORT, nor a "
                      f"file an installed policy kind reads (registered: {registered or 'none'}; a trained baseline's .pt "
-                     "is read once the package is installed: pip install -e .)"
+                     "is read once the campaign is installed: pip install -e campaign, as scripts/setup.sh does)"
                      + (f"; kinds that failed to load: {', '.join(broken)}" if broken else ""))
 
 

@@ -70,7 +70,9 @@ def solve(env, seed=None, debug=False, vis=False, *, closure: float | None = Non
     last = LastAction()
     shown = [Show()] if vis else []
     episode = rollout(env, expert, seed, replan_steps=1, until="plan", observers=[last, *shown])
-    if episode.termination == "plan_end" and not info_bool(episode.info, "success"):
+    info = episode.info
+    if episode.termination == "plan_end" and info_bool(info, "in_target") and not info_bool(info, "is_grasped") \
+            and not info_bool(info, "success"):  # released in the target, not yet at rest
         episode = settle(env, last.action, seed, shown) or episode
     metadata = getattr(env, "episode_metadata", None)
     if metadata is not None and expert.plan is not None:  # whatever happened after planning
@@ -102,7 +104,7 @@ class _Held(Policy):
 def settle(env, action, seed, observers=()):
     """Hold ``action`` until the env's episode ends (the object at rest in its target: success) or
     :data:`SETTLE_STEPS` ticks pass; the rollout of those ticks (None without an action to hold).
-    Only plans whose wait ended with the object still moving get here: an episode that ended at rest
+    Only plans whose wait ended with the released object in its target but still moving get here: an episode that ended at rest
     is the same episode as before this existed, bit for bit."""
     if action is None:
         return None

@@ -98,6 +98,9 @@ class SoftBodyEnv(BaseEnv):
         # The physics settings (physics/config.py), the package's with ``physics``'s overrides: plain
         # values, so ManiSkill records them with the env's kwargs. What the FEM world, the objects and the
         # lockstep rate read; nothing patches module constants.
+        if physics is not None and not isinstance(physics, dict):
+            raise TypeError(f"physics={physics!r}: give a dict of overrides, e.g. {{'newton_substeps': 8}} "
+                            "(dataclasses.asdict(config) for a PhysicsConfig), which ManiSkill can record")
         self.physics = DEFAULT_PHYSICS.with_overrides(physics)
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()

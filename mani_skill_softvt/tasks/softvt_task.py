@@ -254,7 +254,8 @@ class SoftVTTaskEnv(SoftBodyEnv):
         its envelope and tau_o. Loaded once, on first use, so that an env nobody scores needs no card;
         the DSR scorer, the expert and the dense reward all read this one."""
         if self._calibration_card is None:
-            self._calibration_card = load_calibration_card(self.task.soft_asset_id, self.calibration_dir)
+            self._calibration_card = load_calibration_card(self.task.soft_asset_id, self.calibration_dir,
+                                                           physics=self.physics)
         return self._calibration_card
 
     @property
