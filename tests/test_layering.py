@@ -34,7 +34,8 @@ CAMPAIGN_MODULES = {_module_name(p): p for p in CAMPAIGN.rglob("*.py")}
 ALIASES = {"mani_skill_softvt.motionplanning", "mani_skill_softvt.replay", "mani_skill_softvt.serve",
            "mani_skill_softvt.evaluation.maniskill_dp", "mani_skill_softvt.baselines", "mani_skill_softvt.studies",
            "mani_skill_softvt.evaluate", "mani_skill_softvt.compare", "mani_skill_softvt.gallery",
-           "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo", "mani_skill_softvt.calibrate", "mani_skill_softvt.demos"}
+           "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo", "mani_skill_softvt.calibrate", "mani_skill_softvt.demos",
+           "mani_skill_softvt.campaign_alias"}
 
 
 def imported_modules(path: Path) -> set[str]:
