@@ -9,6 +9,7 @@ import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.assets.cards import ASSET_IDS
 from mani_skill_softvt.paths import CALIBRATION_DIR
 from mani_skill_softvt.physics.config import DEFAULT_PHYSICS, PhysicsConfig, physics_signature
+from mani_skill_softvt.tactile.config import DEFAULT_TACTILE
 
 
 def test_the_signature_names_each_setting_as_every_committed_card_recorded_it():
@@ -31,22 +32,31 @@ def test_overrides_make_another_config_and_name_a_setting_that_is_not_one():
     assert cfg.vbd_schedule([5e4]) == (3, 2) and cfg.vbd_schedule([5e4, 1e6]) == (6, 2)
 
 
-def test_an_env_runs_its_fem_world_under_the_physics_it_was_given():
-    """gym.make(..., physics=overrides): the FEM world and the objects take that config; an env built
-    afterwards without overrides has the package's (nothing global was changed)."""
-    worlds = []
-    for physics in ({"newton_substeps": 2, "friction_epsilon": 1e-3, "finger_friction": 0.9}, None):
-        env = gym.make("SoftGraspLift-v1", obs_mode="state", asset_id=ASSET_IDS[0], physics=physics)
+def test_an_env_runs_its_fem_world_and_gelsights_under_the_settings_it_was_given():
+    """gym.make(..., physics=overrides, tactile=overrides): the FEM world and the objects take that
+    physics, the GelSights that gel (tactile/config.py); an env built afterwards without overrides has
+    the package's (nothing global was changed)."""
+    worlds, backgrounds = [], []
+    for physics, tactile in (({"newton_substeps": 2, "friction_epsilon": 1e-3, "finger_friction": 0.9},
+                              {"marker_radius": 5.0, "gel_modulus": 1.2e6}), (None, None)):
+        env = gym.make("SoftGraspLift-v1", obs_mode="state", asset_id=ASSET_IDS[0], physics=physics, tactile=tactile)
         try:
             env.reset(seed=0)
             u = env.unwrapped
             world = u.objects.world
             worlds.append((world.substeps, world.physics.friction_epsilon, u.physics.finger_friction,
-                           u.objects.contact_radius, u.physics.signature() == physics_signature()))
+                           u.objects.contact_radius, u.physics.signature() == physics_signature(),
+                           u.tactile_config.gel_modulus))
+            backgrounds.append(u.tactile_background("left"))
         finally:
             env.close()
-    assert worlds[0] == (2, 1e-3, 0.9, DEFAULT_PHYSICS.particle_radius, False)
-    assert worlds[1] == (4, DEFAULT_PHYSICS.friction_epsilon, 1.2, DEFAULT_PHYSICS.particle_radius, True)
+    assert worlds[0] == (2, 1e-3, 0.9, DEFAULT_PHYSICS.particle_radius, False, 1.2e6)
+    assert worlds[1] == (4, DEFAULT_PHYSICS.friction_epsilon, 1.2, DEFAULT_PHYSICS.particle_radius, True,
+                         DEFAULT_TACTILE.gel_modulus)
+    # The sensors drew their dots at the radius given: larger dots darken more of the gel.
+    assert backgrounds[0].sum() < backgrounds[1].sum()
+    with pytest.raises(ValueError, match=r"tactile settings \['gel_stiffness'\] are not settings"):
+        gym.make("SoftGraspLift-v1", obs_mode="state", asset_id=ASSET_IDS[0], tactile={"gel_stiffness": 1.0})
 
 
 def test_a_card_made_under_other_physics_than_the_envs_is_refused():

@@ -11,9 +11,10 @@ setting passes a config. Values were measured on this project's 2-core CPU machi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 from ..provenance import EE_ORIENTATION_AXIS_ANGLE, signature_differences
+from ..settings import with_overrides
 
 
 @dataclass(frozen=True)
@@ -54,12 +55,7 @@ class PhysicsConfig:
 
     def with_overrides(self, overrides: dict | None = None, **more) -> "PhysicsConfig":
         """This config with some settings replaced; ValueError naming a setting that is not one."""
-        given = {**(overrides or {}), **more}
-        known = {f.name for f in fields(self)}
-        unknown = sorted(set(given) - known)
-        if unknown:
-            raise ValueError(f"physics settings {unknown} are not settings; give some of {sorted(known)}")
-        return replace(self, **given)
+        return with_overrides(self, "physics", overrides, **more)
 
     def vbd_schedule(self, youngs_moduli) -> tuple[int, int]:
         """(Newton substeps per tick, VBD iterations per substep) for a world holding bodies of these

@@ -24,6 +24,7 @@ import numpy as np
 import torch
 from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 
+from .config import DEFAULT_TACTILE, TactileConfig
 from .sensor import SIDES, TactileFrame, TactileSensor
 
 DEPTH_UNIT = 1e-6  # m per count of the int16 depth observation (the gel is 2 mm thick: <= 2000 counts)
@@ -42,10 +43,14 @@ class GelSightConfig(BaseSensorConfig):
     # Half extents (x along image columns, y along rows; m) of the gel the finger carries: no
     # contact is shown outside it. None: the whole field of view.
     pad_half_extents: tuple[float, float] | None = None
+    # The gel, its grid and the markers (tactile.config), as a camera config carries its intrinsics.
+    tactile: TactileConfig = DEFAULT_TACTILE
 
     def __post_init__(self):
         if self.side not in SIDES:
             raise ValueError(f"GelSightConfig side must be one of {SIDES}, got {self.side!r}")
+        if not isinstance(self.tactile, TactileConfig):
+            raise TypeError(f"GelSightConfig tactile must be a TactileConfig, got {self.tactile!r}")
 
 
 class GelSight(BaseSensor):
@@ -58,7 +63,7 @@ class GelSight(BaseSensor):
                  deformable: bool = True):
         super().__init__(config)
         self.deformable = deformable  # FEM surfaces (pressure indentation) or rigid twins (force balance)
-        self.renderer = TactileSensor(config.side, pad_half_extents=config.pad_half_extents)
+        self.renderer = TactileSensor(config.side, pad_half_extents=config.pad_half_extents, config=config.tactile)
         self._contact_surface = contact_surface
         self._pad_pose = pad_pose
         self._normal_force = normal_force

@@ -26,6 +26,7 @@ import numpy as np
 from ..observations import SIDES
 from . import constants as C
 from ..physics.transforms import planar_rigid_fit
+from .config import DEFAULT_TACTILE, TactileConfig
 from .gel import (balanced_indentation, footprint_mask, foundation_stiffness, geometric_indentation,
                   pressure_indentation)
 from .geometry import gap_from_triangles, to_pixels, validate_mesh
@@ -102,19 +103,20 @@ class TactileSensor:
     forgotten when contact is lost, on :meth:`reset`, or when the mesh's vertex count changes.
     """
 
-    def __init__(self, side: str = "left", pad_half_extents=None, downsample: int = C.GEL_GRID_DOWNSAMPLE,
-                 gel_modulus: float = C.GEL_MODULUS):
+    def __init__(self, side: str = "left", pad_half_extents=None, config: TactileConfig = DEFAULT_TACTILE):
         if side not in SIDES:
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
-        if downsample < 1 or C.IMAGE_WIDTH % downsample or C.IMAGE_HEIGHT % downsample:
-            raise ValueError(f"downsample must divide {C.IMAGE_WIDTH} x {C.IMAGE_HEIGHT}, got {downsample!r}")
+        if not isinstance(config, TactileConfig):
+            raise TypeError(f"config must be a TactileConfig (tactile.config), got {config!r}")
         self.side = side
+        self.config = config  # every field is read below (the gel, its grid, the markers)
         self.optics = load_optics()
         self.marker_initial = marker_grid()
-        self.background_frame = draw_markers(self.optics.background, self.marker_initial)
-        self.stiffness = foundation_stiffness(gel_modulus)
+        self.background_frame = draw_markers(self.optics.background, self.marker_initial, config.marker_radius)
+        self.stiffness = foundation_stiffness(config.gel_modulus, config.gel_thickness, config.gel_poisson)
         # The gel grid: the field of view at 1/downsample resolution, with rows added above and
         # below where the pad is longer than the view (the force is carried by the whole pad).
+        downsample = config.grid_downsample
         self.downsample = downsample
         self.grid_pixel = C.PIXEL_SIZE * downsample
         self.grid_width, self.view_rows = C.IMAGE_WIDTH // downsample, C.IMAGE_HEIGHT // downsample
@@ -124,7 +126,8 @@ class TactileSensor:
         self.view_half_extents = (min(half[0], C.FOV_WIDTH / 2), min(half[1], C.FOV_HEIGHT / 2))
         # Marker rest positions in gel-grid pixels (pixel centres map as (x + 0.5) / k - 0.5).
         self.marker_grid_xy = (self.marker_initial + 0.5) / downsample - 0.5
-        self.marker_flow = flow_matrix(self.marker_grid_xy, (self.view_rows, self.grid_width))
+        self.marker_flow = flow_matrix(self.marker_grid_xy, (self.view_rows, self.grid_width), config.gel_thickness,
+                                       config.flow_pool, config.flow_surface_factor)
         self.extra_rows = max(0, int(np.ceil(half[1] / self.grid_pixel - self.view_rows / 2)))
         self.footprint = footprint_mask(self.view_rows + 2 * self.extra_rows, self.grid_width, self.grid_pixel, half)
         self.reset()
@@ -158,21 +161,22 @@ class TactileSensor:
         v, f = validate_mesh(vertices_pad, faces, "vertices_pad")
         # Only a rigid surface can load the gel where it does not reach the plane (up to the sink
         # depth, at most the travel); the other models need the overlap alone, far fewer pixels.
-        reach = C.GEL_THICKNESS if normal_force is not None and not deformable else 0.0
+        travel = self.config.gel_thickness
+        reach = travel if normal_force is not None and not deformable else 0.0
         gap = gap_from_triangles(v, f, reach, self.grid_width, len(self.footprint), self.grid_pixel)
         gap[~self.footprint] = np.inf
         sink = 0.0
         if normal_force is None:
-            ind = geometric_indentation(gap)
+            ind = geometric_indentation(gap, travel)
         elif deformable:
             # Between nodes the linear surface can dip further than any node does (a triangle
             # spanning the pad's edge to a node that wraps around it): no deeper than the nodes.
             hx, hy = self.half_extents
             on_pad = (np.abs(v[:, 0]) <= hx) & (np.abs(v[:, 1]) <= hy)
             cap = float(max(0.0, -v[on_pad, 2].min())) if on_pad.any() else 0.0
-            ind = pressure_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2, cap)
+            ind = pressure_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2, cap, travel)
         else:
-            ind, sink = balanced_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2)
+            ind, sink = balanced_indentation(gap, float(normal_force), self.stiffness, self.grid_pixel ** 2, travel)
         return ind[self.extra_rows:self.extra_rows + self.view_rows], sink
 
     def render_local(self, vertices_pad: np.ndarray, faces: np.ndarray, normal_force: float | None = None,
@@ -196,10 +200,11 @@ class TactileSensor:
         k = self.downsample
         current = k * marker_displacements(
             self.marker_grid_xy, grid, np.asarray(shear_px) / k, twist,
-            centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5, decay=C.SHEAR_DECAY / k,
+            centre=None if centre is None else (np.asarray(centre) + 0.5) / k - 0.5,
+            thickness=self.config.gel_thickness, pool=self.config.flow_pool, decay=self.config.shear_decay / k,
             flow=self.marker_flow, threshold=0.0)  # the whole patch drags the gel, not only its deep part
         current = current - k * self.marker_grid_xy + self.marker_initial  # exact rest positions kept
-        image = draw_markers(render_image(grid, self.optics), current)
+        image = draw_markers(render_image(grid, self.optics), current, self.config.marker_radius)
         return TactileFrame(image, initial, current.astype(np.float32), depth, normal_force, sink, touching)
 
     def _contact_vertices(self, v: np.ndarray, f: np.ndarray, reach: float) -> np.ndarray:

@@ -51,6 +51,7 @@ from ..tactile.sensor import world_to_pad
 from . import constants as C
 from . import fingers
 from ..physics.config import DEFAULT_PHYSICS
+from ..tactile.config import DEFAULT_TACTILE
 from .objects import ObjectSpec, PropCollider, SceneObjects, build_objects  # noqa: F401  (specs: the tasks' API)
 from .robot import PandaSoftVT, validate_action  # noqa: F401  (PandaSoftVT: registers the agent)
 from .suites import FACTOR_OPTIONS, PhysicalFactors, resolve_factors
@@ -71,7 +72,7 @@ class SoftBodyEnv(BaseEnv):
     agent: PandaSoftVT
 
     def __init__(self, *args, robot_uids="panda_softvt", obs_mode: str | None = None, soft_sleep: bool = True,
-                 physics: dict | None = None, **kwargs):
+                 physics: dict | None = None, tactile: dict | None = None, **kwargs):
         if kwargs.get("num_envs", 1) != 1:
             raise ValueError(
                 "SoftVT envs run one environment per process (Newton's CPU kernels and SAPIEN's CPU physics "
@@ -102,6 +103,11 @@ class SoftBodyEnv(BaseEnv):
             raise TypeError(f"physics={physics!r}: give a dict of overrides, e.g. {{'newton_substeps': 8}} "
                             "(dataclasses.asdict(config) for a PhysicsConfig), which ManiSkill can record")
         self.physics = DEFAULT_PHYSICS.with_overrides(physics)
+        # The GelSights' settings (tactile/config.py), overridden the same way: ``tactile={"gel_modulus": 1e6}``.
+        if tactile is not None and not isinstance(tactile, dict):
+            raise TypeError(f"tactile={tactile!r}: give a dict of overrides, e.g. {{'gel_thickness': 1e-3}} "
+                            "(dataclasses.asdict(config) for a TactileConfig), which ManiSkill can record")
+        self.tactile_config = DEFAULT_TACTILE.with_overrides(tactile)
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
         self._lights, self._ambient = [], None  # the scene's lights at nominal intensity (set when loaded)
@@ -132,8 +138,8 @@ class SoftBodyEnv(BaseEnv):
     @property
     def _default_tactile_configs(self) -> list[GelSightConfig]:
         """A GelSight Mini on each finger (configured like the cameras, built in the sensor setup)."""
-        return [GelSightConfig(f"tactile_{side}", side=side, pad_half_extents=C.GEL_PAD_HALF_EXTENTS)
-                for side in SIDES]
+        return [GelSightConfig(f"tactile_{side}", side=side, pad_half_extents=C.GEL_PAD_HALF_EXTENTS,
+                               tactile=self.tactile_config) for side in SIDES]
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)  # ManiSkill builds the cameras only
