@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "demos" / "sample" / "object_soft" / "task3.h5"
+SAMPLE = REPO / "demo-data" / "sample" / "object_soft" / "task3.h5"
 
 
 def time_obs(env, frames: int) -> float:

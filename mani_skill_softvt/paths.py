@@ -1,10 +1,11 @@
 """Filesystem locations used across the package (committed data, user caches).
 
-The committed data (``assets/``, the ``calibration/`` cards) lives at the repo's top level; a wheel
-carries a copy inside the package, ``mani_skill_softvt/_data/`` (pyproject.toml maps it there).
-Each data location is, in this order: its environment variable; the checkout's top-level
-directory when the package runs from a checkout (editable install, PYTHONPATH); the copy
-installed with the package. No demos ship with the package: installed, ``DEMOS_DIR`` names a
+The committed data (``asset-data/``, the ``calibration-data/`` cards, ``demo-data/``) lives at the
+repo's top level, in folders whose names no Python package can have; a wheel carries a copy of the
+assets and cards inside the package, ``mani_skill_softvt/_data/{assets,calibration}``
+(pyproject.toml maps it there). Each data location is, in this order: its environment variable; the
+checkout's top-level folder when the package runs from a checkout (editable install, PYTHONPATH);
+the copy installed with the package. No demos ship with the package: installed, ``DEMOS_DIR`` names a
 directory inside it that writers refuse (:func:`writable_default`).
 """
 
@@ -17,6 +18,8 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_DIR = PACKAGE_DIR.parent  # the checkout when is_checkout(REPO_DIR); site-packages when installed
 INSTALLED_DATA_DIR = PACKAGE_DIR / "_data"  # where the wheel puts assets/ and calibration/
 PROJECT_NAME = "mani-skill-softvt"
+# Each kind of committed data -> its folder in a checkout (the wheel's _data/ keeps the kind's name).
+CHECKOUT_DATA_FOLDERS = {"assets": "asset-data", "calibration": "calibration-data", "demos": "demo-data"}
 
 
 def is_checkout(repo_dir: Path) -> bool:
@@ -32,13 +35,13 @@ def is_checkout(repo_dir: Path) -> bool:
 def data_dir(env_var: str, name: str, environ=None, repo_dir: Path = REPO_DIR,
              installed_dir: Path = INSTALLED_DATA_DIR) -> Path:
     """Directory of the committed data ``name`` (``assets``, ``calibration``, ``demos``): the
-    environment variable ``env_var`` if set (and not empty), else the checkout's top-level
-    ``name``/, else the copy installed with the package."""
+    environment variable ``env_var`` if set (and not empty), else the checkout's top-level folder
+    for it (:data:`CHECKOUT_DATA_FOLDERS`), else the copy installed with the package."""
     value = (os.environ if environ is None else environ).get(env_var)
     if value:
         return Path(value)
     if is_checkout(repo_dir):
-        return Path(repo_dir) / name
+        return Path(repo_dir) / CHECKOUT_DATA_FOLDERS[name]
     return Path(installed_dir) / name
 
 
@@ -64,7 +67,7 @@ def writable_default(path: Path, flag: str, env_var: str, package_dir: Path | No
     if inside_installed_package(path, package_dir):
         raise ValueError(f"the default output directory {path} is inside the installed package "
                          f"({package_dir}): pass {flag} DIR, or set {env_var} to a directory of your own "
-                         f"(e.g. a checkout's top-level {Path(path).name}/)")
+                         f"(e.g. a checkout's top-level {CHECKOUT_DATA_FOLDERS.get(Path(path).name, Path(path).name)}/)")
     return Path(path)
 
 
@@ -75,7 +78,7 @@ def missing_data_hint(directory: Path, env_var: str, name: str, regenerate: str)
     how = (f"regenerate it in this checkout with `{regenerate}`" if running_from_checkout()
            else "reinstall the package (its wheel carries the committed data)")
     return (f"searched {directory}; set {env_var} to a directory that holds it (a checkout's top-level "
-            f"{name}/ has everything committed), or {how}")
+            f"{CHECKOUT_DATA_FOLDERS.get(name, name)}/ has everything committed), or {how}")
 
 
 ASSETS_DIR = data_dir("SOFTVT_ASSETS_DIR", "assets")

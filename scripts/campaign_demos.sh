@@ -5,7 +5,7 @@
 #   HELP_FROM_LAST=1 ... : beside a run that holds the suite, record and render its tasks from the last down
 # Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
-# R_max histogram) are copied back into demos/$SUITE/ for the commit. On a machine without
+# R_max histogram) are copied back into demo-data/$SUITE/ for the commit. On a machine without
 # the episodes, the committed QC logs are copied out first and `generate` records their accepted
 # episodes again. Rounds of ROUND more accepted demos per task keep the tasks level if a session
 # ends early. Each task draws training seeds in order until it has ACCEPTED demos (the expert fails
@@ -34,20 +34,20 @@ exec 8>"$store/.sync.lock"
 # The committed small products go to the store where it lacks them or holds shorter logs (a store
 # left by an older session); the store's own, longer logs are kept. A helper (HELP_FROM_LAST) skips
 # this: the run it helps, which holds the suite, did it and is writing those files now.
-if [ -d "demos/$SUITE" ] && [ -z "${HELP_FROM_LAST:-}" ]; then
+if [ -d "demo-data/$SUITE" ] && [ -z "${HELP_FROM_LAST:-}" ]; then
   flock 8
-  (cd "demos/$SUITE" && find . -type f -print0) | while IFS= read -r -d '' f; do
-    if [ ! -e "$store/$f" ] || [ "$(wc -l < "demos/$SUITE/$f")" -gt "$(wc -l < "$store/$f")" ]; then
-      mkdir -p "$(dirname "$store/$f")" && cp "demos/$SUITE/$f" "$store/$f"
+  (cd "demo-data/$SUITE" && find . -type f -print0) | while IFS= read -r -d '' f; do
+    if [ ! -e "$store/$f" ] || [ "$(wc -l < "demo-data/$SUITE/$f")" -gt "$(wc -l < "$store/$f")" ]; then
+      mkdir -p "$(dirname "$store/$f")" && cp "demo-data/$SUITE/$f" "$store/$f"
     fi
   done
   flock -u 8
 fi
 sync_back() {
-  mkdir -p "demos/$SUITE"
+  mkdir -p "demo-data/$SUITE"
   flock 8
   (cd "$store" && find . \( -name manifest.json -o -name qc_report.json -o -name stats.json -o -name r_max_hist.png \
-      -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demos/$SUITE/")
+      -o -name qc.jsonl \) -print0 | xargs -0 -I{} cp --parents {} "$OLDPWD/demo-data/$SUITE/")
   flock -u 8
 }
 trap sync_back EXIT

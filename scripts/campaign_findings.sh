@@ -7,7 +7,7 @@
 # Run it from a git worktree at a fixed commit (no code change under a running evaluation), e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
 #     scripts/campaign_findings.sh rigid > /work/lane-rigid.log 2>&1 &
-# Its products (policies, records, reports, QC logs) land in that worktree's baselines/ and demos/,
+# Its products (policies, records, reports, QC logs) land in that worktree's baselines/policies/, campaign-data/ and demo-data/,
 # to be copied into main and committed as each finishes. Stores stay outside the checkout
 # (SOFTVT_DEMOS_DIR, SOFTVT_RUNS_DIR): on a machine without them the demos are recorded again from
 # the committed QC logs and a training starts again from step 0 (a checkpoint is too large to commit).
@@ -19,7 +19,7 @@
 # 60 min on a new machine, 2 min on a machine that holds them): the soft lane waits for them, so
 # VT-C's rigid training starts about an hour sooner than beside the soft recording, and the soft
 # recording loses nothing (start the rigid lane first). The closure study
-# writes into its own directory (baselines/results/closure_rigid_vo-c_vt-c/), beside the VO-C-only
+# writes into its own directory (campaign-data/results/closure_rigid_vo-c_vt-c/), beside the VO-C-only
 # study that docs/findings.md cites, and runs two workers (one per policy) for its few minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -69,7 +69,7 @@ train_and_score() {  # SUITE VARIANT NAME [SET]: the recipe of the committed Obj
 }
 
 closure_study() {  # TASK: both rigid policies' closures on 10 ID seeds; skipped once its report exists
-  local task=$1 out=baselines/results/closure_rigid_vo-c_vt-c
+  local task=$1 out=campaign-data/results/closure_rigid_vo-c_vt-c
   local report=$out/closure_object_rigid_task$task.json
   if [ -f "$report" ]; then step "closure study task $task: done ($report)"; return; fi
   step "closure study, Object-Rigid task $task, VO-C and VT-C"

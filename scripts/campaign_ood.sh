@@ -4,10 +4,10 @@
 #   bash scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
 # Every stage resumes where it stopped (records are appended as episodes finish): run the same
 # command again in the next session, from a checkout that holds the records so far.
-# 1. OOD: 9 held-out conditions x 10 tasks x 10 episodes a policy, into baselines/results/;
+# 1. OOD: 9 held-out conditions x 10 tasks x 10 episodes a policy, into campaign-data/results/;
 # 2. ID twins: the first 10 ID seeds of each task again, on the OOD episodes' machine, into
-#    baselines/results/twins/ (paired with the OOD episodes by the report);
-# 3. the report: baselines/results/ood.md, ood.json, ood_curves.png.
+#    campaign-data/results/twins/ (paired with the OOD episodes by the report);
+# 3. the report: campaign-data/results/ood.md, ood.json, ood_curves.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
@@ -18,12 +18,12 @@ read -r -a policies <<< "${2:-vo-c-cpu vt-c-cpu}"
 PY=${PY:-.venv/bin/python}
 for p in "${policies[@]}"; do
   "$PY" -m mani_skill_softvt.evaluate --policy "baselines/policies/$p.pt" --protocol ood --tasks all \
-    --episodes-per-task 10 --workers "$WORKERS" --out baselines/results
+    --episodes-per-task 10 --workers "$WORKERS" --out campaign-data/results
 done
 for p in "${policies[@]}"; do
   "$PY" -m mani_skill_softvt.evaluate --policy "baselines/policies/$p.pt" --tasks all --episodes-per-task 10 \
-    --workers "$WORKERS" --out baselines/results/twins
+    --workers "$WORKERS" --out campaign-data/results/twins
 done
 ood=()
-for p in "${policies[@]}"; do ood+=("baselines/results/object_soft_ood_$p.jsonl"); done
-"$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins baselines/results/twins --out baselines/results
+for p in "${policies[@]}"; do ood+=("campaign-data/results/object_soft_ood_$p.jsonl"); done
+"$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins campaign-data/results/twins --out campaign-data/results

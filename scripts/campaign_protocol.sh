@@ -11,7 +11,7 @@
 # 2. exports the policy to baselines/policies/[SUITE/]NAME.pt (float16, at most 20 MiB; left as it is
 #    if already exported from the same policy, so its records stay reproducible);
 # 3. evaluates it on SUITE's ID protocol, PER_TASK episodes per task (default 50, all of them; the
-#    pre-registered design scores extra training seeds on the first 25), resumable, into baselines/results/;
+#    pre-registered design scores extra training seeds on the first 25), resumable, into campaign-data/results/;
 # 4. writes the report beside the paper's numbers (both Object suites, so a rigid-twin variant is
 #    paired with its soft one), the old-physics rows kept apart.
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
@@ -40,7 +40,7 @@ fi
 mkdir -p "$(dirname "$policy")"
 "$PY" -m softvt_campaign.baselines.export "$run/policy.pt" "$policy" --if-changed
 "$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task "${PER_TASK:-50}" \
-  --workers "$WORKERS" --out baselines/results
+  --workers "$WORKERS" --out campaign-data/results
 shopt -s nullglob
-"$PY" -m softvt_campaign.studies.results baselines/results/object_soft_id_*.jsonl \
-  baselines/results/object_rigid_id_*.jsonl --legacy baselines/results/old_physics/*.jsonl --out baselines/results
+"$PY" -m softvt_campaign.studies.results campaign-data/results/object_soft_id_*.jsonl \
+  campaign-data/results/object_rigid_id_*.jsonl --legacy campaign-data/results/old_physics/*.jsonl --out campaign-data/results

@@ -6,7 +6,7 @@
 # each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
 # spent; run again to continue. Runs (checkpoints, prepared data) stay beside the demos
 # (SOFTVT_RUNS_DIR, default /root/softvt-runs); every snapshot's open-loop error is logged to
-# baselines/search/<variant>.jsonl, which is committed. SET="key=value ..." adds overrides to
+# campaign-data/search/<variant>.jsonl, which is committed. SET="key=value ..." adds overrides to
 # every recipe (runs named <variant>-<recipe>+key=value).
 set -euo pipefail
 cd "$(dirname "$0")/.."

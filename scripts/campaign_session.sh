@@ -10,7 +10,7 @@
 # 2. VARIANT trained with the committed policies' recipe (noaug, 24,000 steps) and seed SEED into
 #    $SOFTVT_RUNS_DIR, exported to baselines/policies/SUITE/NAME.pt (commit it as soon as it is
 #    there: a training outlives a session only as its exported policy), then scored on PER_TASK ID
-#    episodes of each task into baselines/results/ (resumable: run the same command again).
+#    episodes of each task into campaign-data/results/ (resumable: run the same command again).
 # A rigid suite's VO training (75 min on one core) fits one session after its demos; a soft suite's
 # demos alone take about two hours of both cores, so its trainings wait for a machine that keeps the
 # stores between sessions. Run it from a worktree at a fixed commit, e.g.

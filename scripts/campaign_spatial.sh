@@ -3,7 +3,7 @@
 # 1,000 accepted Spatial-Rigid demos (100 a task; about 1 s each), then 1,000 Spatial-Soft ones
 # (about 22 s each), each screened as the Object sets are (the instructed instance on the plate, no
 # drop, R_max <= 1), rendered for training (rgb+tactile, 84x84 cameras) in rounds of 10 a task,
-# their small products (manifest, QC logs, QC report, stats, R_max histogram) copied into demos/ after
+# their small products (manifest, QC logs, QC report, stats, R_max histogram) copied into demo-data/ after
 # every round for the commit. Run it again in any later session: each round skips what its QC logs
 # list; on a machine without the episodes they are recorded again from the committed logs.
 # SCREEN_ONLY=1 (passed on to campaign_demos.sh): grow the QC logs only, without recording again the

@@ -142,7 +142,7 @@ def test_a_committed_accepted_demo_is_recorded_again_as_its_qc_log_says(tmp_path
     from mani_skill_softvt.evaluation.wrapper import make_env
     from mani_skill_softvt.paths import REPO_DIR
 
-    demos = DemoSet(REPO_DIR / "demos", "spatial_rigid")
+    demos = DemoSet(REPO_DIR / "demo-data", "spatial_rigid")
     assert json.loads(demos.manifest.read_text())["numerics"] == "x86-64-v3"
     line = next(q for q in demos.verdicts(3) if q["accepted"])
     env = make_env("spatial_rigid", 3, obs_mode="none", control_mode="pd_ee_pose")
@@ -325,7 +325,7 @@ def test_a_rigid_twins_touch_renders_from_its_stored_states_as_the_live_episode_
     from mani_skill_softvt.observations import flatten_batch
     from mani_skill_softvt.paths import REPO_DIR
 
-    src, size = REPO_DIR / "demos" / "sample" / "object_rigid" / "task3.h5", (16, 16)
+    src, size = REPO_DIR / "demo-data" / "sample" / "object_rigid" / "task3.h5", (16, 16)
     render_observations(src, tmp_path / "touch.h5", "object_rigid", 3, "rgb+tactile", camera_size=size)
     episode = read_episode(src)
     env = make_env("object_rigid", 3, dsr=False, obs_mode="rgb+tactile", camera_size=size, control_mode="pd_ee_pose")
@@ -355,7 +355,7 @@ def test_a_rigid_trajectory_recorded_without_its_contact_state_is_refused_for_to
     from mani_skill_softvt.paths import REPO_DIR
 
     src = tmp_path / "task3.h5"
-    shutil.copy(REPO_DIR / "demos" / "sample" / "object_rigid" / "task3.h5", src)
+    shutil.copy(REPO_DIR / "demo-data" / "sample" / "object_rigid" / "task3.h5", src)
     with h5py.File(src, "a") as f:
         del f["traj_0/env_states/contact_wrenches"]
     with pytest.raises(ValueError, match=f"{src}: seed 300000 .*record the demos again"):
@@ -528,7 +528,7 @@ def test_the_committed_samples_were_recorded_under_the_current_physics():
     from mani_skill_softvt.physics.constants import physics_signature
 
     for suite in ("object_soft", "object_rigid"):
-        manifest = json.loads((REPO_DIR / "demos" / "sample" / suite / "manifest.json").read_text())
+        manifest = json.loads((REPO_DIR / "demo-data" / "sample" / suite / "manifest.json").read_text())
         assert manifest["physics"] == physics_signature(), suite
 
 

@@ -224,7 +224,7 @@ def test_the_paired_difference_interval_covers_at_its_level():
 
 
 def test_records_of_earlier_versions_are_read_in_todays_format():
-    """The committed records of the previous physics (baselines/results/old_physics) predate the
+    """The committed records of the previous physics (campaign-data/results/old_physics) predate the
     camera size, the tactile model and the collapse count: read, they carry what those versions
     meant (native cameras, gel model 1, no collapse counted), their stored DSR outcome unchanged."""
     import json
@@ -232,9 +232,9 @@ def test_records_of_earlier_versions_are_read_in_todays_format():
 
     from mani_skill_softvt.evaluation.records import read_records
 
-    path = Path(__file__).parents[1] / "baselines/results/old_physics/object_soft_id_vt-c-cpu.jsonl"
+    path = Path(__file__).parents[1] / "campaign-data/results/old_physics/object_soft_id_vt-c-cpu.jsonl"
     if not path.exists():
-        pytest.skip("needs the checkout's baselines/results")
+        pytest.skip("needs the checkout's campaign-data/results")
     stored = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     assert not {"camera_size", "tactile_model", "collapsed_steps"} & set(stored[0])
     read = read_records(path)

@@ -71,7 +71,7 @@ def test_seeds_name_protocol_episodes_and_a_bad_action_is_a_recorded_result(tmp_
 
 def _nominal_mass(task_id: int) -> float:
     """The object's mass in a committed ID record of the task (nominal factors)."""
-    committed = read_records(REPO_DIR / "baselines" / "results" / "object_soft_id_vo-c-cpu.jsonl")
+    committed = read_records(REPO_DIR / "campaign-data" / "results" / "object_soft_id_vo-c-cpu.jsonl")
     return next(r["receipt"]["mass"] for r in committed if r["task_id"] == task_id)
 
 

@@ -1,6 +1,6 @@
 """LeRobot v3.0 export: layout, schema and values checked with pyarrow reads, mp4s decoded with imageio.
 
-The committed sample (demos/sample) is rendered once (rgb+tactile, about a minute) and exported;
+The committed sample (demo-data/sample) is rendered once (rgb+tactile, about a minute) and exported;
 refusals are checked on small synthetic files.
 """
 
@@ -22,7 +22,7 @@ from mani_skill_softvt.integrations.lerobot.export import (STATE_PARTS, Source, 
                                                      video_sources)
 from mani_skill_softvt.paths import REPO_DIR
 
-SAMPLE = REPO_DIR / "demos" / "sample"
+SAMPLE = REPO_DIR / "demo-data" / "sample"
 # Evaluator-only or privileged quantities: none may name an exported column, feature or stat.
 FORBIDDEN = ("node", "deform", "collapse", "r_max", "ratio", "centroid", "object", "youngs", "young", "mass", "evaluator",
              "pad_force", "tau", "closure", "env_state", "soft", "grasped", "dropped", "fem", "seed")

@@ -130,7 +130,7 @@ def test_the_lerobot_users_loop_trains_evaluates_and_leaves_softvt_records(tmp_p
         return done
 
     demos = tmp_path / "demos"
-    shutil.copytree(REPO_DIR / "demos" / "sample", demos)
+    shutil.copytree(REPO_DIR / "demo-data" / "sample", demos)
     py = sys.executable
     run(py, "-m", "mani_skill_softvt.demos", "render", "--suite", "object_soft", "--tasks", "3", "--out", demos,
         "--camera-size", "84x84")

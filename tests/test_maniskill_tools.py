@@ -248,7 +248,7 @@ def test_maniskill_replay_of_a_soft_demo_reproduces_the_fem_state_bit_for_bit(so
 def test_the_committed_soft_sample_replays_to_success_on_any_machine(soft_demo, tmp_path):
     from mani_skill_softvt.paths import REPO_DIR
 
-    src = _copy(REPO_DIR / "demos" / "sample" / "object_soft" / f"task{TASK}.h5", tmp_path)
+    src = _copy(REPO_DIR / "demo-data" / "sample" / "object_soft" / f"task{TASK}.h5", tmp_path)
     _run("mani_skill.trajectory.replay_trajectory", "--traj-path", str(src), "-o", "state", "--save-traj")
     with h5py.File(src, "r") as a, h5py.File(tmp_path / f"{src.stem}.state.pd_ee_pose.physx_cpu.h5", "r") as b, \
             h5py.File(soft_demo, "r") as c:

@@ -32,7 +32,7 @@ def wheel(tmp_path_factory):
     ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "build")
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(REPO_DIR / name, src / name)
-    for name in ("mani_skill_softvt", "assets", "calibration"):
+    for name in ("mani_skill_softvt", "asset-data", "calibration-data"):
         shutil.copytree(REPO_DIR / name, src / name, ignore=ignore)
     out = tmp_path_factory.mktemp("wheels")
     run = subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation",
@@ -45,10 +45,10 @@ def wheel(tmp_path_factory):
 def test_wheel_ships_the_committed_assets_and_calibration_cards(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
     cards = [f"objects/{a}/card.json" for a in ASSET_IDS + TWIN_IDS] + [f"props/{p}/card.json" for p in PROP_NAMES]
-    assert set(cards) <= set(_committed("assets", "**/*"))
-    missing = [f for f in _committed("assets", "**/*") if DATA + "assets/" + f not in names]  # cards, meshes, tets
+    assert set(cards) <= set(_committed("asset-data", "**/*"))
+    missing = [f for f in _committed("asset-data", "**/*") if DATA + "assets/" + f not in names]  # cards, meshes, tets
     assert not missing, f"the wheel lacks committed asset files: {missing}"
-    calibration = _committed("calibration", "*.json")
+    calibration = _committed("calibration-data", "*.json")
     assert len(calibration) == len(ASSET_IDS)
     missing = [f for f in calibration if DATA + "calibration/" + f not in names]
     assert not missing, f"the wheel lacks calibration cards: {missing}"
@@ -117,7 +117,7 @@ def test_data_dirs_resolve_env_then_checkout_then_installed_copy(tmp_path, monke
     repo, site = _layouts(tmp_path)
     installed = site / "mani_skill_softvt" / "_data"
     monkeypatch.delenv("SOFTVT_ASSETS_DIR", raising=False)
-    assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=repo, installed_dir=installed) == repo / "assets"
+    assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=repo, installed_dir=installed) == repo / "asset-data"
     assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=site, installed_dir=installed) == installed / "assets"
     # Another project's pyproject.toml beside the package is not a checkout of this one.
     (site / "pyproject.toml").write_text('[project]\nname = "something-else"\n')
@@ -127,7 +127,7 @@ def test_data_dirs_resolve_env_then_checkout_then_installed_copy(tmp_path, monke
     for repo_dir in (repo, site):
         assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=repo_dir, installed_dir=installed) == tmp_path / "mine"
     monkeypatch.setenv("SOFTVT_ASSETS_DIR", "")
-    assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=repo, installed_dir=installed) == repo / "assets"
+    assert data_dir("SOFTVT_ASSETS_DIR", "assets", repo_dir=repo, installed_dir=installed) == repo / "asset-data"
     assert paths.running_from_checkout()  # this test session
 
 

@@ -3,6 +3,7 @@ record and the table of what an older file lacks; each row of the table names th
 on it, and that code exists."""
 
 import importlib
+from pathlib import Path
 
 import pytest
 
@@ -43,3 +44,49 @@ def test_a_signature_difference_names_the_setting_and_a_missing_signature_says_s
     older = {k: v for k, v in now.items() if k != "EE_ORIENTATION_AXIS_ANGLE"}  # made before the hand fix
     assert provenance.signature_differences(older, now) == ["EE_ORIENTATION_AXIS_ANGLE: recorded None, now 1.0"]
     assert "made before signatures existed" in provenance.signature_differences(None, now)[0]
+
+
+def test_a_data_folders_old_spelling_reads_as_its_new_name(tmp_path, monkeypatch, capsys):
+    """The committed data folders were renamed (``*-data``): a path in the old spelling maps to the new
+    one, and a command given such a path reads the file there with a note; a path that exists as given,
+    or under no renamed folder, is left as it is."""
+    from mani_skill_softvt.cli.arguments import existing_path
+    from mani_skill_softvt.provenance import RENAMED_DATA_FOLDERS, current_data_path
+
+    assert current_data_path("baselines/results/object_soft_id_vo-c-cpu.jsonl") == \
+        "campaign-data/results/object_soft_id_vo-c-cpu.jsonl"
+    assert current_data_path("./demos/spatial_soft/stats.json") == "demo-data/spatial_soft/stats.json"
+    assert current_data_path("baselines/policies/vo-c-cpu.pt") is None  # not moved (yet)
+    assert current_data_path("outputs/eval/x.jsonl") is None
+    assert all(new.endswith("-data/") or new.startswith("campaign-data/") for new in RENAMED_DATA_FOLDERS.values())
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "campaign-data" / "results").mkdir(parents=True)
+    (tmp_path / "campaign-data" / "results" / "r.jsonl").write_text("")
+    found = existing_path(Path("baselines/results/r.jsonl"), "--reproduce")
+    assert found == Path("campaign-data/results/r.jsonl")
+    assert "--reproduce baselines/results/r.jsonl: that folder was renamed; reading campaign-data/results/r.jsonl" \
+        in capsys.readouterr().err
+    (tmp_path / "baselines" / "results").mkdir(parents=True)
+    (tmp_path / "baselines" / "results" / "r.jsonl").write_text("")  # a user's own file there is theirs
+    assert existing_path(Path("baselines/results/r.jsonl"), "--reproduce") == Path("baselines/results/r.jsonl")
+    assert existing_path(Path("nowhere.jsonl"), "--a") == Path("nowhere.jsonl")  # the command's own error follows
+
+
+def test_the_checkout_keeps_its_data_in_folders_no_package_can_be_named(tmp_path):
+    """Each kind of data resolves to its renamed folder, and git tracks nothing under an old spelling (a
+    checkout pulled across the rename may keep ignored files there: docs/install.md says where they go)."""
+    import shutil
+    import subprocess
+
+    from mani_skill_softvt.paths import CHECKOUT_DATA_FOLDERS, REPO_DIR, data_dir
+
+    for kind, folder in CHECKOUT_DATA_FOLDERS.items():
+        assert (REPO_DIR / folder).is_dir() and not folder.isidentifier()
+        assert data_dir("SOFTVT_NO_SUCH_VARIABLE", kind) == REPO_DIR / folder
+    assert (REPO_DIR / "campaign-data" / "results").is_dir()
+    if shutil.which("git") is None or not (REPO_DIR / ".git").exists():
+        pytest.skip("not a git checkout")
+    old = [o.rstrip("/") for o in provenance.RENAMED_DATA_FOLDERS]
+    tracked = subprocess.run(["git", "ls-files", "--", *old], cwd=REPO_DIR, capture_output=True, text=True,
+                             check=True).stdout.split()
+    assert not tracked, f"files committed under a data folder's old name: {tracked[:5]}"

@@ -39,7 +39,7 @@ def test_a_table_of_files_from_two_machines_says_it_crosses_them():
 def test_the_committed_sidecars_name_every_file_that_does_not_name_its_machine():
     from mani_skill_softvt.evaluation.records import read_records
 
-    for directory in (REPO_DIR / "baselines" / "results", REPO_DIR / "baselines" / "results" / "twins"):
+    for directory in (REPO_DIR / "campaign-data" / "results", REPO_DIR / "campaign-data" / "results" / "twins"):
         for path in sorted(directory.glob("*.jsonl")):
             first = read_records(path)[0]
             if not ((first["receipt"].get("stack") or {}).get("cpu")):

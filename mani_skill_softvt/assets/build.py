@@ -1,4 +1,4 @@
-"""Generate every asset file under ``assets/`` (bit-identical on every run).
+"""Generate every asset file under ``asset-data/`` (bit-identical on every run).
 
     python -m mani_skill_softvt.assets.build            # all objects, twins and props
     python -m mani_skill_softvt.assets.build --out /tmp/assets --only soft_stw_cube_hq
@@ -282,7 +282,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.assets.build", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=None,
-                    help=f"output directory (default {ASSETS_DIR}: $SOFTVT_ASSETS_DIR, else the checkout's assets/; "
+                    help=f"output directory (default {ASSETS_DIR}: $SOFTVT_ASSETS_DIR, else the checkout's asset-data/; "
                          "needed when the package is installed)")
     ap.add_argument("--only", nargs="*", help="asset ids or prop names to build (default: all)")
     ap.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION)

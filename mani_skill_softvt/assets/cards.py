@@ -1,8 +1,8 @@
 """Asset cards: one JSON file per object and per prop, validated on load.
 
-Objects live in ``assets/objects/<asset_id>/card.json``; rigid twins have their own card that
+Objects live in ``asset-data/objects/<asset_id>/card.json``; rigid twins have their own card that
 points at the soft asset's files (surface, tets, visuals) and lists their own convex collision
-parts; a twin has no elastic constants (it is a PhysX rigid body). Props live in ``assets/props/<name>/card.json``.
+parts; a twin has no elastic constants (it is a PhysX rigid body). Props live in ``asset-data/props/<name>/card.json``.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def _remedy() -> str:
     copy comes from its wheel (the builder would not write into site-packages by default)."""
     if paths.running_from_checkout():
         return f"rebuild the assets with: {_BUILD}"
-    return "reinstall the package (its wheel carries the assets), or set SOFTVT_ASSETS_DIR to a checkout's assets/"
+    return "reinstall the package (its wheel carries the assets), or set SOFTVT_ASSETS_DIR to a checkout's asset-data/"
 
 
 def _not_found_hint(assets_dir: Path) -> str:

@@ -1,4 +1,4 @@
-"""Calibration cards: one JSON per deformable asset in ``calibration/`` (written atomically)."""
+"""Calibration cards: one JSON per deformable asset in ``calibration-data/`` (written atomically)."""
 
 from __future__ import annotations
 

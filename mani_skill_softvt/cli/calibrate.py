@@ -6,9 +6,9 @@
 
 For each asset: the scripted grasp, lift and 2 s hold at every closure from loose to tight,
 several repeats with small pose jitter; slip is measured from the object's motion relative to
-the hand. Writes ``calibration/<asset>.json`` (card with every sweep record, so any percentile
-can be recomputed), ``calibration/plots/<asset>.png`` and ``calibration/plots/summary.png``.
-Interrupted runs resume: finished trials are kept in ``calibration/.sweeps/<asset>.jsonl``.
+the hand. Writes ``calibration-data/<asset>.json`` (card with every sweep record, so any percentile
+can be recomputed), ``calibration-data/plots/<asset>.png`` and ``calibration-data/plots/summary.png``.
+Interrupted runs resume: finished trials are kept in ``calibration-data/.sweeps/<asset>.jsonl``.
 Trials and cards record the physics constants they ran under; after the physics changed,
 ``--restart`` sets the old logs aside (``.sweeps/replaced/``) and sweeps from scratch. The trials
 and sweeps are :mod:`mani_skill_softvt.expert.calibration_trials`.
@@ -45,7 +45,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--quick", action="store_true", help="one asset, four closures, one repeat (smoke test)")
     ap.add_argument("--out", type=Path, default=None,
                     help=f"cards, plots and sweep logs (default {CALIBRATION_DIR}: $SOFTVT_CALIBRATION_DIR, else the "
-                         "checkout's calibration/; needed to calibrate when the package is installed)")
+                         "checkout's calibration-data/; needed to calibrate when the package is installed)")
     ap.add_argument("--restart", action="store_true",
                     help="set the assets' sweep logs aside (.sweeps/replaced/) and sweep from scratch, e.g. after "
                          "the physics changed; without it an interrupted run resumes")

@@ -24,6 +24,7 @@ from ..evaluation.sidecar import machine, numerics, sidecar
 from ..evaluation.records import read_records
 from ..evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, first_per_task, outcome_of, rliable_summary,
                                     seed_scores, size_note, verdict)
+from .arguments import existing_path
 
 
 def load_runs(paths: list[Path]) -> list[list[dict]]:
@@ -96,6 +97,7 @@ def main(argv=None) -> str:
     ap.add_argument("--claim", choices=("sign", "size", "none"), default="sign",
                     help="what --paper claims: its sign, its size, or no difference")
     args = ap.parse_args(argv)
+    args.a, args.b = ([existing_path(p, flag) for p in paths] for flag, paths in (("--a", args.a), ("--b", args.b)))
     try:
         a_runs, b_runs = load_runs(args.a), load_runs(args.b)
         episodes = subset(a_runs + b_runs, args.per_task or None)

@@ -33,7 +33,7 @@ from ..tasks.suites import NUM_TASKS, SUITES
 
 
 _OUT_HELP = (f"demos directory, generate + render output (default {DEMOS_DIR}: $SOFTVT_DEMOS_DIR, else the "
-             "checkout's demos/; needed to generate or render when the package is installed)")
+             "checkout's demo-data/; needed to generate or render when the package is installed)")
 
 
 def _parser() -> argparse.ArgumentParser:

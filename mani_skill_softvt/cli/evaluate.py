@@ -5,7 +5,7 @@
         --obs-mode rgb+tactile --tasks all --episodes-per-task 50 --workers 2
     python -m mani_skill_softvt.cli.evaluate --tasks all --episodes-per-task 50 --ray ray://head:10001   # on Ray
     python -m mani_skill_softvt.cli.evaluate --rescore outputs/eval/object_soft_id_expert.jsonl --percentile 80
-    python -m mani_skill_softvt.cli.evaluate --reproduce baselines/results/object_soft_id_vo-c-cpu.jsonl
+    python -m mani_skill_softvt.cli.evaluate --reproduce campaign-data/results/object_soft_id_vo-c-cpu.jsonl
 
 Writes one JSONL record per episode (resumable), a markdown and JSON report, and plots of the
 R_t traces (and, for OOD, TSR/DSR per factor). ``--rescore`` re-aggregates stored records at
@@ -37,6 +37,7 @@ from ..observations import CameraSize
 from ..numerics import numerics_of, reproduction_note
 from ..stack import MACHINE_KEYS, software_stack, stack_differences, unrecorded
 from ..tasks.suites import SUITES, task_spec
+from .arguments import existing_path
 
 
 def main(argv=None) -> dict:
@@ -81,13 +82,13 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
 
     if args.rescore is not None:
-        return _rescore(args.rescore, args.percentile, args.out)
+        return _rescore(existing_path(args.rescore, "--rescore"), args.percentile, args.out)
     if args.reproduce is not None:
         given = [f for f, v in (("--policy", args.policy != "expert"), ("--obs-mode", args.obs_mode), ("--ray", args.ray),
                                 ("--control-mode", args.control_mode), ("--camera-size", args.camera_size)) if v]
         if given:
             ap.error(f"--reproduce runs the records' own policy and configuration; drop {', '.join(given)}")
-        return _reproduce(ap, args.reproduce, args.episodes_per_task or 1, args.workers)
+        return _reproduce(ap, existing_path(args.reproduce, "--reproduce"), args.episodes_per_task or 1, args.workers)
     if args.video < 0:
         ap.error("--video must be >= 0")
     def resolve(obs_mode):

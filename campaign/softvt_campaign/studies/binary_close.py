@@ -1,7 +1,7 @@
 """What a binary close does to each object against its tolerance (the findings campaign's step 4).
 
     python -m softvt_campaign.studies.binary_close --demos /root/binary-close --seeds 10
-    python -m softvt_campaign.studies.binary_close --demos baselines/results/binary_close   # the committed run's logs
+    python -m softvt_campaign.studies.binary_close --demos campaign-data/results/binary_close   # the committed run's logs
 
 A binary gripper action has two values: open, or close until the fingers stall against the 10 N
 force limit (``pd_ee_pose_binary``, as the release's binary action). The scripted expert runs
@@ -144,9 +144,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--seeds", type=int, default=None, metavar="N",
                     help="generate (or resume) the first N training seeds of every task first")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--continuous", type=Path, default=Path("demos"),
-                    help="demos root holding the continuous expert's QC logs (default: the checkout's demos/)")
-    ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    ap.add_argument("--continuous", type=Path, default=Path("demo-data"),
+                    help="demos root holding the continuous expert's QC logs (default: the checkout's demo-data/)")
+    ap.add_argument("--out", type=Path, default=Path("campaign-data/results"))
     args = ap.parse_args(argv)
     if args.seeds is not None:
         from mani_skill_softvt.demonstrations.generate import generate  # the expert and its planner: only when generating

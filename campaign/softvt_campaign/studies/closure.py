@@ -1,9 +1,9 @@
 """How trained policies close the gripper over an episode, beside the expert's closure for the same seed.
 
     python -m softvt_campaign.studies.closure baselines/policies/vo-c-cpu.pt \
-        baselines/policies/vt-c-cpu.pt --task 3 --episodes 6 --out baselines/results
+        baselines/policies/vt-c-cpu.pt --task 3 --episodes 6 --out campaign-data/results
     python -m softvt_campaign.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
-        --suite object_rigid --task 7 --episodes 10 --demos $SOFTVT_DEMOS_DIR --out baselines/results
+        --suite object_rigid --task 7 --episodes 10 --demos $SOFTVT_DEMOS_DIR --out campaign-data/results
 
 The scripted expert draws one closure per episode, uniform in the object's calibrated envelope
 [g_min, g_max], and commands it at once for the whole hold (``expert.pick_place``). A learned
@@ -247,7 +247,7 @@ def main(argv=None) -> dict:
                     help="the suite the policies were trained on and run in (default object_soft)")
     ap.add_argument("--task", type=int, default=3, help="task id (default 3: on Object-Soft, the soft cube)")
     ap.add_argument("--episodes", type=int, default=6, help=f"the first N ID seeds of the task (1-{ID_EPISODES_PER_TASK})")
-    ap.add_argument("--records", type=Path, default=Path("baselines/results"),
+    ap.add_argument("--records", type=Path, default=Path("campaign-data/results"),
                     help="where the policies' ID records are, to check each episode against")
     ap.add_argument("--demos", type=Path, default=None,
                     help="the demos root (SOFTVT_DEMOS_DIR): also measure how the held jaw width reads out the "

@@ -1,6 +1,6 @@
 """The paper's four findings tested on the Object suites, each marked supported, contradicted or unresolved.
 
-    python -m softvt_campaign.studies.findings baselines/results
+    python -m softvt_campaign.studies.findings campaign-data/results
 
 Reads the campaign's records under the results directory (each verified against its hash): the
 ID records of both Object suites (``object_soft_id_*.jsonl``, ``object_rigid_id_*.jsonl``), the
@@ -435,7 +435,7 @@ def build(result: dict) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m softvt_campaign.studies.findings", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("results", nargs="?", type=Path, default=Path("baselines/results"),
+    ap.add_argument("results", nargs="?", type=Path, default=Path("campaign-data/results"),
                     help="the campaign's results directory (records, twins/, binary_close.json)")
     ap.add_argument("--out", type=Path, default=None, help="directory for findings.md/.json (default: RESULTS)")
     args = ap.parse_args(argv)

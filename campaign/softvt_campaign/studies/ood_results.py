@@ -1,7 +1,7 @@
 """The OOD protocol's results beside the paper's (Finding 4): pooled, per condition, under stiffness shift.
 
-    python -m softvt_campaign.studies.ood_results baselines/results/object_soft_ood_vo-c-cpu.jsonl \\
-        baselines/results/object_soft_ood_vt-c-cpu.jsonl --out baselines/results
+    python -m softvt_campaign.studies.ood_results campaign-data/results/object_soft_ood_vo-c-cpu.jsonl \\
+        campaign-data/results/object_soft_ood_vt-c-cpu.jsonl --out campaign-data/results
 
 Each OOD records file is read with its policy's ID records (the same directory's
 ``<suite>_id_<policy>.jsonl``, each record verified against its hash). The OOD protocol runs the
@@ -277,7 +277,7 @@ def load_runs(paths: list[Path], twins: Path | None = None, twins_required: bool
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("ood", nargs="+", type=Path, help="OOD records files (<suite>_ood_<policy>.jsonl)")
-    ap.add_argument("--out", type=Path, default=Path("baselines/results"))
+    ap.add_argument("--out", type=Path, default=Path("campaign-data/results"))
     ap.add_argument("--twins", type=Path, default=None, metavar="DIR",
                     help="read the ID twins from DIR/<suite>_id_<policy>.jsonl (re-run on the OOD episodes' machine)")
     args = ap.parse_args(argv)

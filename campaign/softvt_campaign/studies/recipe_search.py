@@ -12,7 +12,7 @@ preset (:data:`~.config.RECIPES`), plus any ``--set key=value`` (the run is then
 never trained on: those after ``--demos-per-task``, which stay the same as the set grows). Each run trains under ``--runs`` (outside the checkout: checkpoints and
 the prepared data are large), resuming where it stopped, until it ends or the time budget runs
 out; it keeps a snapshot policy every ``--snapshot-every`` steps. Every snapshot's open-loop
-error (:mod:`.openloop`) and training time become a line of ``baselines/search/<variant>.jsonl``
+error (:mod:`.openloop`) and training time become a line of ``campaign-data/search/<variant>.jsonl``
 (committed: the table survives the machine), so each recipe yields a curve of error against
 training time. The runs share one prepared-data cache (``<runs>/data_cache``): recipes that read
 the demos the same way read one copy. A recipe that differs from one trained earlier in the same
@@ -21,9 +21,9 @@ command only in how the network is sampled (:data:`~.config.INFERENCE_FIELDS`: `
 
 ``--closed-loop N`` trains nothing: it evaluates the runs' snapshots (those of ``--steps``, default
 all) on the ID protocol, N episodes per task, with ``--workers`` processes, into
-``baselines/search/closed_loop/<run>/object_soft_id_<snapshot>.jsonl`` (committed, resumable:
+``campaign-data/search/closed_loop/<run>/object_soft_id_<snapshot>.jsonl`` (committed, resumable:
 ``evaluate``'s records). It can run beside a training run. The table then shows TSR and DSR with
-their Wilson intervals beside the open-loop error, and ``baselines/search/<variant>.png`` plots
+their Wilson intervals beside the open-loop error, and ``campaign-data/search/<variant>.png`` plots
 both against training time (the chosen recipe's curve of TSR against training time).
 """
 
@@ -54,7 +54,7 @@ from .openloop import load_run_windows, openloop
 # Checkpoints and prepared data are large: outside the repository's tracked files (the campaign
 # keeps them beside its demos, SOFTVT_RUNS_DIR); the results table is small and committed.
 RUNS_DIR = Path(os.environ.get("SOFTVT_RUNS_DIR", REPO_DIR / "outputs" / "recipe_search"))
-RESULTS_DIR = REPO_DIR / "baselines" / "search"
+RESULTS_DIR = REPO_DIR / "campaign-data" / "search"
 HELDOUT = 10  # demos per task set aside (the last ones), for every recipe alike
 SNAPSHOT_EVERY = 1500
 

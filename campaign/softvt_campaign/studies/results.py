@@ -1,7 +1,7 @@
 """The baselines' results beside the paper's: TSR, DSR, TSR - DSR and its share of successes.
 
-    python -m softvt_campaign.studies.results baselines/results/object_soft_id_*.jsonl \
-        --legacy baselines/results/old_physics/*.jsonl
+    python -m softvt_campaign.studies.results campaign-data/results/object_soft_id_*.jsonl \
+        --legacy campaign-data/results/old_physics/*.jsonl
 
 Reads evaluation records (each verified against its hash), groups them by the policy's name in
 the receipt (``diffusion_policy[vo-c,cpu]``, ...: variant and recipe) and, for trained policy

@@ -1,6 +1,6 @@
 """The paper's findings judged by the pre-registered seed-level rule (docs/preregistration.md).
 
-    python -m softvt_campaign.studies.seed_findings baselines/results
+    python -m softvt_campaign.studies.seed_findings campaign-data/results
 
 Reads every committed ID record of the Object suites (``<suite>_id_<policy>[-seed<N>].jsonl``; a
 file's records are one training seed of one recipe) and the OOD records of VO-C and VT-C, scores
@@ -161,7 +161,7 @@ def build(policies: dict, ood: dict) -> tuple[str, dict]:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("results", type=Path, nargs="?", default=Path("baselines/results"))
+    ap.add_argument("results", type=Path, nargs="?", default=Path("campaign-data/results"))
     args = ap.parse_args(argv)
     try:
         found = load(args.results)  # the records the findings read, each verified

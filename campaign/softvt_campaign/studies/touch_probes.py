@@ -299,7 +299,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--tasks", nargs="+", type=int, default=list(range(NUM_TASKS)))
     ap.add_argument("--camera-size", default="84x84", help="which rendering (as passed to demos render)")
     ap.add_argument("--heldout-fraction", type=float, default=0.2, help="the last demos of each task, scored on")
-    ap.add_argument("--out", type=Path, default=REPO_DIR / "baselines" / "probes")
+    ap.add_argument("--out", type=Path, default=REPO_DIR / "campaign-data" / "probes")
     args = ap.parse_args(argv)
     if not 0 < args.heldout_fraction < 1:
         ap.error(f"--heldout-fraction {args.heldout_fraction}: give a fraction in (0, 1)")

@@ -266,7 +266,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--pivot", action="store_true", help=f"the pivoting twins at their light closures: {PIVOT}")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3])
     ap.add_argument("--yaw", nargs="+", default=list(YAW_MODES), help="'align' or a hand yaw in rad ('0': default heading)")
-    ap.add_argument("--out", type=Path, default=REPO_DIR / "baselines" / "results")
+    ap.add_argument("--out", type=Path, default=REPO_DIR / "campaign-data" / "results")
     args = ap.parse_args(argv)
     plan = dict(PIVOT if args.pivot else CUBE)
     if args.assets or args.closures:

@@ -4,7 +4,7 @@ Every flag is ManiSkill's own, handed over unchanged (``--traj-path``, ``-o``, `
 ``--use-env-states``, ``--use-first-env-state``, ``--save-traj``, ``--save-video``, ``-n`` ...;
 ``--help`` lists them)::
 
-    python -m mani_skill_softvt.replay --traj-path demos/sample/object_soft/task3.h5 \\
+    python -m mani_skill_softvt.replay --traj-path demo-data/sample/object_soft/task3.h5 \\
         --use-env-states -o rgb+tactile --save-traj
     python -m mani_skill_softvt.replay --traj-path FILE.h5 --use-env-states -o pointcloud+tactile --save-traj
     python -m mani_skill_softvt.replay --traj-path FILE.h5 -c pd_ee_delta_pose -o rgb --save-traj
