@@ -42,6 +42,7 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
     assert manifest["physics"] == physics_signature()
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_round_that_records_nothing_keeps_the_merged_file_and_a_newer_episode_is_merged_again(dataset):
     import os
 

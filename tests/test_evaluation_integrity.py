@@ -172,6 +172,7 @@ def _alive(pid: int) -> bool:
         return False
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_kill_9_of_the_evaluator_leaves_no_process_behind(tmp_path):
     # 20 hold episodes: minutes of work, so the worker is still busy when the evaluator is killed.
@@ -238,6 +239,7 @@ def test_a_user_policy_cannot_claim_the_privilege_of_the_builtin_experts(cube_en
     assert rec["termination"] in ("timeout", "success", "dropped") and rec["steps"] > 0
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_the_evaluator_renders_the_cameras_at_the_size_a_policy_asks_for(tmp_path):
     """A policy trained on small images (``camera_size``) sees its cameras rendered at that size,
     and its record says so; other policies' records keep the native 224x224."""

@@ -67,7 +67,7 @@ def _move(u, mode: str) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- vector envs
-@pytest.mark.parametrize("obs_mode", ["state", pytest.param("rgb", marks=pytest.mark.slow),
+@pytest.mark.parametrize("obs_mode", [pytest.param("state", marks=pytest.mark.slow), pytest.param("rgb", marks=pytest.mark.slow),
                                       pytest.param("rgb+tactile", marks=pytest.mark.slow)])
 def test_async_vector_env_with_shared_memory_in_spawned_workers(obs_mode):
     # Spawned workers start a fresh interpreter each (~20-30 s with the imports, the scene build and,

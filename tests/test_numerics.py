@@ -143,6 +143,7 @@ def test_a_records_file_holds_one_numerics_and_resuming_it_under_others_is_refus
         evaluate(run, path)
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_campaign_command_run_on_its_own_runs_under_the_pins():
     """softvt-train and python -m softvt_campaign... import the campaign first: it imports the library
     before numpy or torch, so the pins hold there too."""

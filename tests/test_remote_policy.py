@@ -255,6 +255,7 @@ def _serve_cli(policy: str, timeout: float = 90):
         proc.wait(10)
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (test_served_policy_matches_in_process stays)
 def test_env_episode_scored_the_same_in_process_and_served():
     import gymnasium as gym
 
