@@ -13,7 +13,8 @@ def with_overrides(config, kind: str, overrides: dict | None = None, **more):
     """``config`` (a frozen dataclass) with some fields replaced; ValueError naming any key that is
     not one of its fields (``kind`` names the settings in the message: "physics", "tactile")."""
     if overrides is not None and not isinstance(overrides, dict):
-        raise TypeError(f"{kind} overrides must be a dict of setting -> value, got {overrides!r}")
+        raise TypeError(f"{kind}={overrides!r}: give a dict of overrides (dataclasses.asdict(config) for a "
+                        f"{type(config).__name__}), which ManiSkill can record")
     given = {**(overrides or {}), **more}
     known = {f.name for f in fields(config)}
     unknown = sorted(set(given) - known)

@@ -99,14 +99,8 @@ class SoftBodyEnv(BaseEnv):
         # The physics settings (physics/config.py), the package's with ``physics``'s overrides: plain
         # values, so ManiSkill records them with the env's kwargs. What the FEM world, the objects and the
         # lockstep rate read; nothing patches module constants.
-        if physics is not None and not isinstance(physics, dict):
-            raise TypeError(f"physics={physics!r}: give a dict of overrides, e.g. {{'newton_substeps': 8}} "
-                            "(dataclasses.asdict(config) for a PhysicsConfig), which ManiSkill can record")
         self.physics = DEFAULT_PHYSICS.with_overrides(physics)
         # The GelSights' settings (tactile/config.py), overridden the same way: ``tactile={"gel_modulus": 1e6}``.
-        if tactile is not None and not isinstance(tactile, dict):
-            raise TypeError(f"tactile={tactile!r}: give a dict of overrides, e.g. {{'gel_thickness': 1e-3}} "
-                            "(dataclasses.asdict(config) for a TactileConfig), which ManiSkill can record")
         self.tactile_config = DEFAULT_TACTILE.with_overrides(tactile)
         self.soft_sleep = bool(soft_sleep)  # resting soft bodies that nothing moving nears skip the FEM
         self.factors = PhysicalFactors()
