@@ -63,12 +63,28 @@ PARTS: dict[str, dict[str, str]] = {
     "warp": {},  # set on warp.config by physics/fem.py (warp_cpu_compiler_flags), not by a variable
     "aten": {"ATEN_CPU_CAPABILITY": "avx2"},  # torch's vectorised kernels (Sleef maths, reductions)
     "onednn": {"ONEDNN_MAX_CPU_ISA": "AVX2", "DNNL_MAX_CPU_ISA": "AVX2"},  # convolutions, bf16 products
-    "mkl": {"MKL_CBWR": "AVX2", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},  # torch's fp32 matrix products
+    # torch's fp32 matrix products. MKL's AVX2 branch holds on Intel CPUs only: elsewhere MKL_CBWR=AVX2
+    # falls back to MKL's AUTO branch (oneMKL Developer Guide, "Getting Started with Conditional
+    # Numerical Reproducibility"), so goldens made on an AMD EPYC moved on an Intel Xeon (the VT-C
+    # chunk by 1e-6). COMPATIBLE (SSE2 without rcpps/rsqrtps) is the branch MKL keeps the same on
+    # Intel and compatible CPUs; a DP chunk measured no slower under it (0.40 s against 0.43 s).
+    "mkl": {"MKL_CBWR": "COMPATIBLE", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
     "openblas": {"OPENBLAS_CORETYPE": "Haswell"},  # NumPy's linear algebra (the Kabsch SVD of D_t)
     "numpy": {"NPY_DISABLE_CPU_FEATURES": _AVX512_NUMPY},  # NumPy's own SIMD loops (exp, sin, sort...)
     "opencv": {"OPENCV_CPU_DISABLE": _AVX512_OPENCV} if _AVX512_OPENCV else {},  # the tactile optics' resizes
     "llvmpipe": {"LP_NATIVE_VECTOR_WIDTH": "256"},  # Mesa's software rasteriser (the cameras)
 }
+
+# Parts as earlier pins had them, named so that a record made under them is replayed under them
+# (never chosen by default). "mkl-avx2": the pins until 2026-12-03 (package 0.1.0's records named
+# them "x86-64-v3"), whose MKL branch depends on the CPU's vendor: such a record's policy products
+# replay bit for bit only on CPUs of the vendor that made it (numerics_of names them so).
+LEGACY_PARTS: dict[str, dict[str, str]] = {
+    "mkl-avx2": {"MKL_CBWR": "AVX2", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
+}
+_ALL_PARTS = {**PARTS, **LEGACY_PARTS}
+# The pinned choice of the earlier pins, as numerics_of spells it for their records.
+PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p != 'mkl'), *LEGACY_PARTS])}"
 
 
 @dataclass(frozen=True)
@@ -87,7 +103,7 @@ class Numerics:
         """The variables that pin this choice, ``SOFTVT_NUMERICS`` among them (for a spawned process)."""
         out = {NUMERICS_ENV: self.name}
         for part in self.parts:
-            out.update(PARTS[part])
+            out.update(_ALL_PARTS[part])
         return out
 
 
@@ -101,10 +117,13 @@ def parse(name: str) -> Numerics:
         raise ValueError(f"{NUMERICS_ENV}={name!r}: use {PINNED!r} (the default), {NATIVE!r}, or "
                          f"'{PINNED}:part,part' with parts from {', '.join(PARTS)}")
     parts = tuple(p.strip() for p in subset.split(",") if p.strip()) if subset else tuple(PARTS)
-    unknown = [p for p in parts if p not in PARTS]
+    unknown = [p for p in parts if p not in _ALL_PARTS]
     if unknown:
-        raise ValueError(f"{NUMERICS_ENV}={name!r}: unknown part(s) {', '.join(unknown)}; parts are {', '.join(PARTS)}")
-    ordered = tuple(p for p in PARTS if p in parts)
+        raise ValueError(f"{NUMERICS_ENV}={name!r}: unknown part(s) {', '.join(unknown)}; parts are {', '.join(PARTS)}"
+                         f" (and, to replay records of earlier pins, {', '.join(LEGACY_PARTS)})")
+    if "mkl" in parts and "mkl-avx2" in parts:
+        raise ValueError(f"{NUMERICS_ENV}={name!r}: mkl and mkl-avx2 pin one library two ways; name one")
+    ordered = tuple(p for p in _ALL_PARTS if p in parts)
     # One spelling per choice (records and demo sets compare names): the parts in PARTS' order.
     return Numerics(PINNED if ordered == tuple(PARTS) else f"{PINNED}:{','.join(ordered)}", ordered)
 
@@ -125,7 +144,7 @@ _RELEASED: set[str] = set()  # parts this process gave back to the library's own
 
 
 def _pinning_variables() -> list[str]:
-    return sorted({v for part in PARTS.values() for v in part})
+    return sorted({v for part in _ALL_PARTS.values() for v in part})
 
 
 def pin(environ=None) -> Numerics:
@@ -256,11 +275,21 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
     native dispatch as that kind of machine had it (:data:`LEGACY_NUMERICS`), ``native`` where unknown."""
     receipt = record.get("receipt") or {}
     if receipt.get("numerics"):
-        return receipt["numerics"]["name"]
+        numerics = receipt["numerics"]
+        # The earlier pins were named as today's are; their MKL variables tell them apart.
+        if numerics["name"] == PINNED and (numerics.get("environment") or {}).get("MKL_CBWR") == "AVX2":
+            return PINNED_MKL_AVX2
+        return numerics["name"]
     if known and known.get("numerics"):
         return known["numerics"]
     cpu = (receipt.get("stack") or {}).get("cpu") or ""
     return next((n for model, n in LEGACY_NUMERICS.items() if cpu.startswith(model)), NATIVE)
+
+
+def _vendor(cpu: str) -> str | None:
+    """The CPU's vendor as its model name says it (``Intel(R) Xeon(R) ...``, ``AMD EPYC ...``)."""
+    text = cpu.lower()
+    return "intel" if "intel" in text else "amd" if "amd" in text else None
 
 
 def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:
@@ -277,8 +306,16 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
     x86-64 machine); else whether this machine is of the kind that made it (``known``: its file's
     provenance sidecar entry, for a record that does not name its machine)."""
     numerics = (record.get("receipt") or {}).get("numerics")
-    if numerics and numerics.get("pinned"):
+    if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
         return None
+    if numerics and numerics.get("pinned"):  # the earlier pins: all but MKL's vendor-dependent branch
+        made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
+        here = stack.get("cpu") or "unknown"
+        same = _vendor(made) is not None and _vendor(made) == _vendor(here)
+        return (f"the records were made under the earlier pins ({PINNED_MKL_AVX2}), whose MKL branch depends on the "
+                f"CPU's vendor, on {made}; this machine is {here}: "
+                + ("of the same vendor, so they replay bit for bit" if same else
+                   "their policy's float32 products may round otherwise here, and their outcomes may differ"))
     made = (record.get("receipt") or {}).get("stack") or {}
     if not made.get("cpu") and known and known.get("cpu"):
         made = {"cpu": known["cpu"], "cpu-isa": known.get("cpu-isa")}

@@ -90,6 +90,27 @@ def test_a_record_names_its_numerics_and_a_reproduction_is_told_about_the_machin
     assert N.numerics_of(pinned) == "x86-64-v3" and N.reproduction_note(pinned, xeon) is None
 
 
+def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earlier_records_replay_as_made():
+    """MKL_CBWR=AVX2 is MKL's Intel-only branch (elsewhere it falls back to AUTO): the pins take
+    COMPATIBLE. A record of the earlier pins names the same numerics but MKL_CBWR=AVX2 in its
+    environment; it is replayed under those (mkl-avx2), and its reproduction says where it holds."""
+    assert N.parse(N.PINNED).environment()["MKL_CBWR"] == "COMPATIBLE"
+    assert N.parse(N.PINNED_MKL_AVX2).environment()["MKL_CBWR"] == "AVX2"
+    assert N.parse(N.PINNED_MKL_AVX2).name == N.PINNED_MKL_AVX2 and "mkl" not in N.parse(N.PINNED_MKL_AVX2).parts
+    with pytest.raises(ValueError, match="mkl and mkl-avx2"):
+        N.parse("x86-64-v3:mkl,mkl-avx2")
+    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
+    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
+    earlier = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
+                                                       "environment": {"MKL_CBWR": "AVX2"}}}}
+    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
+                                                     "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
+    assert N.numerics_of(earlier) == N.PINNED_MKL_AVX2 and N.numerics_of(today) == N.PINNED
+    assert "may differ" in N.reproduction_note(earlier, xeon)
+    assert "same vendor" in N.reproduction_note(earlier, {**epyc, "cpu": "AMD EPYC 9R14"})
+    assert N.reproduction_note(today, xeon) is None
+
+
 # ------------------------------------------------------------------------------------ goldens
 
 
