@@ -134,20 +134,22 @@ def calibration_trial() -> dict:
     return {"record": rec, "episode": sha(rec)}
 
 
-def policy_record(policy: str = "baselines/policies/object_rigid/vt-c-cpu.pt", suite: str = "object_rigid",
+def policy_record(policy: str = "campaign-data/policies/object_rigid/vt-c-cpu.pt", suite: str = "object_rigid",
                   task_id: int = 0) -> dict:
     """The evaluator's record of ``policy``'s first ID episode of ``task_id`` in ``suite`` (all but its
-    wall time, stack and numerics). The default, a rigid-twin episode of the committed VT-C, runs the
-    policy's closed loop with cameras and touch in a fraction of a soft episode's time."""
+    wall time, stack, numerics and the policy's path: its file is named by ``policy_sha256``). The
+    default, a rigid-twin episode of the committed VT-C, runs the policy's closed loop with cameras and
+    touch in a fraction of a soft episode's time."""
     from .evaluation.run import RunConfig
     from .evaluation.runner import NOT_REPRODUCED, evaluate
 
     run = RunConfig.resolve(policy, suite=suite, tasks=(task_id,), episodes_per_task=1)
     with tempfile.TemporaryDirectory() as tmp:
         (rec,) = evaluate(run, Path(tmp) / "records.jsonl")
-    # The stack, numerics and package version name the run; they are not what it computed.
+    # The stack, numerics and package version name the run, and the path where the policy file lies
+    # (it moved from baselines/policies/) names no computation; they are not what it computed.
     receipt = {k: v for k, v in rec["receipt"].items() if k not in ("stack", "numerics", "package_version")}
-    rec = {**{k: v for k, v in rec.items() if k not in NOT_REPRODUCED}, "receipt": receipt}
+    rec = {**{k: v for k, v in rec.items() if k not in (*NOT_REPRODUCED, "policy")}, "receipt": receipt}
     return {"steps": rec["steps"], "r_max": rec["r_max"], "termination": rec["termination"], "episode": sha(rec)}
 
 

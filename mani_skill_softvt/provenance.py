@@ -19,14 +19,15 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 # ------------------------------------------------------------------ renamed data folders
 
 # The committed data's top-level folders took names no Python package can have ('-' cannot be
 # imported), so that none is taken for code: old spelling -> new. A path given in an old spelling is
-# read as the same file under the new name. baselines/policies/ has not moved yet: its 147 MB exceed
-# what one submission may carry, so it moves in steps of its own (then it gains its row here, and the
-# sealed records, which name their policy by that path, are read through the same map).
+# read as the same file under the new name. The sealed records name their policy file by the path it
+# had when they were made (``baselines/policies/...``); they stay as sealed, and what compares runs
+# (resume, reproduce, record_differences) compares those paths through this map.
 RENAMED_DATA_FOLDERS = {
     "assets/": "asset-data/",
     "calibration/": "calibration-data/",
@@ -34,6 +35,7 @@ RENAMED_DATA_FOLDERS = {
     "baselines/results/": "campaign-data/results/",
     "baselines/search/": "campaign-data/search/",
     "baselines/probes/": "campaign-data/probes/",
+    "baselines/policies/": "campaign-data/policies/",
 }
 
 
@@ -46,6 +48,20 @@ def current_data_path(path) -> str | None:
         if text.startswith(old):
             return new + text[len(old):]
     return None
+
+
+def same_data_path(a, b) -> bool:
+    """Whether ``a`` and ``b`` name one file, either in a renamed folder's old spelling or its new one
+    (two records of one run, one made before the rename); anything else compares as it is."""
+    return a == b or (isinstance(a, str) and isinstance(b, str)
+                      and (current_data_path(a) or a) == (current_data_path(b) or b))
+
+
+def moved_data_path(path) -> str | None:
+    """Where a file named in a renamed folder's old spelling lies now: the new spelling if ``path``
+    does not exist and that one does, else None (the path is read as it is)."""
+    moved = current_data_path(path)
+    return moved if moved is not None and not Path(path).exists() and Path(moved).exists() else None
 
 
 # ------------------------------------------------------------------ version markers

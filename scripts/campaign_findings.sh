@@ -7,7 +7,7 @@
 # Run it from a git worktree at a fixed commit (no code change under a running evaluation), e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
 #     scripts/campaign_findings.sh rigid > /work/lane-rigid.log 2>&1 &
-# Its products (policies, records, reports, QC logs) land in that worktree's baselines/policies/, campaign-data/ and demo-data/,
+# Its products (policies, records, reports, QC logs) land in that worktree's campaign-data/ and demo-data/,
 # to be copied into main and committed as each finishes. Stores stay outside the checkout
 # (SOFTVT_DEMOS_DIR, SOFTVT_RUNS_DIR): on a machine without them the demos are recorded again from
 # the committed QC logs and a training starts again from step 0 (a checkpoint is too large to commit).
@@ -75,8 +75,8 @@ closure_study() {  # TASK: both rigid policies' closures on 10 ID seeds; skipped
   step "closure study, Object-Rigid task $task, VO-C and VT-C"
   mkdir -p "$out"
   local rc=0
-  "$PY" -m softvt_campaign.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
-    baselines/policies/object_rigid/vt-c-cpu.pt --suite object_rigid --task "$task" --episodes 10 \
+  "$PY" -m softvt_campaign.studies.closure campaign-data/policies/object_rigid/vo-c-cpu.pt \
+    campaign-data/policies/object_rigid/vt-c-cpu.pt --suite object_rigid --task "$task" --episodes 10 \
     --demos "$SOFTVT_DEMOS_DIR" --out "$out" || rc=$?
   # Exit status 1 with its report written: some records differ from the committed ones (another
   # machine rounds differently; the report says whether the outcomes held). Anything else is a failure.

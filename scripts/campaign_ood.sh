@@ -17,11 +17,11 @@ WORKERS=${1:-1}
 read -r -a policies <<< "${2:-vo-c-cpu vt-c-cpu}"
 PY=${PY:-.venv/bin/python}
 for p in "${policies[@]}"; do
-  "$PY" -m mani_skill_softvt.evaluate --policy "baselines/policies/$p.pt" --protocol ood --tasks all \
+  "$PY" -m mani_skill_softvt.evaluate --policy "campaign-data/policies/$p.pt" --protocol ood --tasks all \
     --episodes-per-task 10 --workers "$WORKERS" --out campaign-data/results
 done
 for p in "${policies[@]}"; do
-  "$PY" -m mani_skill_softvt.evaluate --policy "baselines/policies/$p.pt" --tasks all --episodes-per-task 10 \
+  "$PY" -m mani_skill_softvt.evaluate --policy "campaign-data/policies/$p.pt" --tasks all --episodes-per-task 10 \
     --workers "$WORKERS" --out campaign-data/results/twins
 done
 ood=()

@@ -8,7 +8,7 @@
 # 1. trains the recipe (SET: more overrides) on every accepted demo of SUITE (default object_soft;
 #    SOFTVT_DEMOS_DIR, rendered at 84x84) into $SOFTVT_RUNS_DIR/final/[SUITE/]NAME, until BUDGET_MIN
 #    minutes are spent (run again to continue; nothing below runs before training ends);
-# 2. exports the policy to baselines/policies/[SUITE/]NAME.pt (float16, at most 20 MiB; left as it is
+# 2. exports the policy to campaign-data/policies/[SUITE/]NAME.pt (float16, at most 20 MiB; left as it is
 #    if already exported from the same policy, so its records stay reproducible);
 # 3. evaluates it on SUITE's ID protocol, PER_TASK episodes per task (default 50, all of them; the
 #    pre-registered design scores extra training seeds on the first 25), resumable, into campaign-data/results/;
@@ -29,7 +29,7 @@ export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 PY=${PY:-.venv/bin/python}
 sub=$([ "$SUITE" = object_soft ] || echo "$SUITE/")
 run=$SOFTVT_RUNS_DIR/final/$sub$NAME
-policy=baselines/policies/$sub$NAME.pt
+policy=campaign-data/policies/$sub$NAME.pt
 read -r -a sets <<< "${SET:-}"
 "$PY" -m softvt_campaign.baselines.train --variant "$VARIANT" --recipe "$RECIPE" --set threads=1 "suite=$SUITE" \
   "${sets[@]}" --demos "$SOFTVT_DEMOS_DIR" --out "$run" --cache "$SOFTVT_RUNS_DIR/data_cache" --budget-min "$BUDGET" \

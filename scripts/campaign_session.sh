@@ -8,7 +8,7 @@
 #    bit, under the pinned numerics), merged and rendered at 84 px, on both cores: about 16 + 60 min
 #    for a rigid suite on a new machine, nothing where the store already holds it;
 # 2. VARIANT trained with the committed policies' recipe (noaug, 24,000 steps) and seed SEED into
-#    $SOFTVT_RUNS_DIR, exported to baselines/policies/SUITE/NAME.pt (commit it as soon as it is
+#    $SOFTVT_RUNS_DIR, exported to campaign-data/policies/SUITE/NAME.pt (commit it as soon as it is
 #    there: a training outlives a session only as its exported policy), then scored on PER_TASK ID
 #    episodes of each task into campaign-data/results/ (resumable: run the same command again).
 # A rigid suite's VO training (75 min on one core) fits one session after its demos; a soft suite's

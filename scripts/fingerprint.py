@@ -49,7 +49,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, help="write the fingerprints here (JSON)")
     p.add_argument("--compare", type=Path, help="compare with fingerprints written before; exit 1 on a difference")
-    p.add_argument("--policy", default="baselines/policies/object_rigid/vt-c-cpu.pt",
+    p.add_argument("--policy", default="campaign-data/policies/object_rigid/vt-c-cpu.pt",
                    help="the policy whose record is fingerprinted")
     p.add_argument("--suite", default="object_rigid", help="the suite of that record")
     p.add_argument("--cases", nargs="+", default=DEFAULT_CASES, choices=sorted(CASES))

@@ -13,7 +13,7 @@ from softvt_campaign.studies import findings as F
 def _rec(i, success, r_max, policy="vo-c-cpu", variant="vo-c,cpu", suite="object_soft"):
     task, k = divmod(i, 50)  # 50 episodes a task: i in [0, 500) is the whole ID protocol
     rec = {"suite": suite, "task_id": task, "condition": "id", "seed": id_seed(task, k),
-           "policy": f"baselines/policies/{policy}.pt", "policy_sha256": f"{policy}-{suite}",
+           "policy": f"campaign-data/policies/{policy}.pt", "policy_sha256": f"{policy}-{suite}",
            "success": success, "dsr_success": success and r_max <= 1.0, "r_max": r_max,
            "termination": "success" if success else "timeout", "collapsed_steps": 0,
            "receipt": {"policy": f"diffusion_policy[{variant}]"}}
@@ -44,7 +44,7 @@ def test_a_claim_is_judged_against_the_seed_spread_and_its_interval():
     assert F.claim("x", "unknown", "differ")["verdict"] == F.UNRESOLVED
     assert F.overall([F.claim("x", "a>b", "a>b"), F.claim("y", "missing", "a>b")]) == F.UNRESOLVED
     assert F.overall([F.claim("x", "a>b", "a>b"), F.claim("y", "a<b", "a>b")]) == F.CONTRADICTED
-    assert F.policy_seed("baselines/policies/object_rigid/vt-c-cpu-seed2.pt") == ("vt-c-cpu", 2)
+    assert F.policy_seed("campaign-data/policies/object_rigid/vt-c-cpu-seed2.pt") == ("vt-c-cpu", 2)
     assert F.policy_seed("outputs/baselines/object_soft/vo-c-cpu/policy.pt") == ("vo-c-cpu", 0)
 
 

@@ -12,7 +12,7 @@ from mani_skill_softvt.tasks.suites import OOD_CONDITIONS
 
 def _rec(task, i, condition, success, r_max, variant="vo-c,cpu"):
     rec = {"suite": "object_soft", "task_id": task, "condition": condition, "seed": id_seed(task, i),
-           "policy": f"baselines/policies/{variant.split(',')[0]}-cpu.pt", "success": success,
+           "policy": f"campaign-data/policies/{variant.split(',')[0]}-cpu.pt", "success": success,
            "dsr_success": success and r_max <= 1.0, "r_max": r_max, "termination": "success" if success else "timeout",
            "collapsed_steps": 0, "receipt": {"policy": f"diffusion_policy[{variant}]"}}
     rec["record_sha256"] = record_hash(rec)

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from mani_skill_softvt import actions, provenance
+from mani_skill_softvt.fileio import file_sha256
 from mani_skill_softvt.data import trajectory
 from mani_skill_softvt.evaluation import records
 from mani_skill_softvt.physics.config import DEFAULT_PHYSICS
@@ -56,7 +57,7 @@ def test_a_data_folders_old_spelling_reads_as_its_new_name(tmp_path, monkeypatch
     assert current_data_path("baselines/results/object_soft_id_vo-c-cpu.jsonl") == \
         "campaign-data/results/object_soft_id_vo-c-cpu.jsonl"
     assert current_data_path("./demos/spatial_soft/stats.json") == "demo-data/spatial_soft/stats.json"
-    assert current_data_path("baselines/policies/vo-c-cpu.pt") is None  # not moved (yet)
+    assert current_data_path("baselines/policies/vo-c-cpu.pt") == "campaign-data/policies/vo-c-cpu.pt"
     assert current_data_path("outputs/eval/x.jsonl") is None
     assert all(new.endswith("-data/") or new.startswith("campaign-data/") for new in RENAMED_DATA_FOLDERS.values())
     monkeypatch.chdir(tmp_path)
@@ -70,6 +71,36 @@ def test_a_data_folders_old_spelling_reads_as_its_new_name(tmp_path, monkeypatch
     (tmp_path / "baselines" / "results" / "r.jsonl").write_text("")  # a user's own file there is theirs
     assert existing_path(Path("baselines/results/r.jsonl"), "--reproduce") == Path("baselines/results/r.jsonl")
     assert existing_path(Path("nowhere.jsonl"), "--a") == Path("nowhere.jsonl")  # the command's own error follows
+
+
+def test_a_policy_named_by_its_folders_old_spelling_is_one_file_with_its_new_one(tmp_path, monkeypatch, capsys):
+    """The sealed records name their policy by ``baselines/policies/...``: a run resumed or reproduced
+    from the moved file is the same run, its records compare equal on the path, and a spec in the old
+    spelling loads the file where it lies now, with a note."""
+    import shutil
+
+    from mani_skill_softvt.evaluation.policies import resolve_policy
+    from mani_skill_softvt.evaluation.runner import is_run_record, record_differences, single_run
+    from mani_skill_softvt.provenance import same_data_path
+
+    old, new = "baselines/policies/vo-c-cpu.pt", "campaign-data/policies/vo-c-cpu.pt"
+    assert same_data_path(old, new) and same_data_path("./" + old, new) and same_data_path(None, None)
+    assert not same_data_path(old, "campaign-data/policies/vt-c-cpu.pt") and not same_data_path(old, None)
+    rec = {"policy": old, "obs_mode": "rgb", "policy_sha256": "ab", "suite": "object_soft", "task_id": 0,
+           "condition": "id", "seed": 1, "success": True}
+    assert is_run_record(rec, {"policy": new, "obs_mode": "rgb"}, "ab")
+    assert not is_run_record(rec, {"policy": new, "obs_mode": "rgb"}, "cd")  # another file's content
+    assert record_differences(rec, {**rec, "policy": new}) == []
+    assert record_differences(rec, {**rec, "policy": "campaign-data/policies/vt-c-cpu.pt"}) == ["policy"]
+    assert single_run([rec, {**rec, "policy": new, "seed": 2}], tmp_path / "r.jsonl") == "ab"
+
+    committed = Path(__file__).resolve().parents[1] / new
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "campaign-data" / "policies").mkdir(parents=True)
+    shutil.copy(committed, tmp_path / new)
+    source = resolve_policy(old)
+    assert source.spec == new and source.sha256 == file_sha256(committed)
+    assert f"policy {old}: that folder was renamed; reading {new}" in capsys.readouterr().err
 
 
 def test_the_checkout_keeps_its_data_in_folders_no_package_can_be_named(tmp_path):
@@ -89,4 +120,9 @@ def test_the_checkout_keeps_its_data_in_folders_no_package_can_be_named(tmp_path
     old = [o.rstrip("/") for o in provenance.RENAMED_DATA_FOLDERS]
     tracked = subprocess.run(["git", "ls-files", "--", *old], cwd=REPO_DIR, capture_output=True, text=True,
                              check=True).stdout.split()
-    assert not tracked, f"files committed under a data folder's old name: {tracked[:5]}"
+    # The policies' 147 MB move in two submissions (docs/baselines.md): until the second deletes them,
+    # the old folder may hold only copies of what the new one holds.
+    copies = [t for t in tracked if t.startswith("baselines/policies/")
+              and file_sha256(REPO_DIR / t) == file_sha256(REPO_DIR / provenance.current_data_path(t))]
+    assert sorted(set(tracked) - set(copies)) == [], \
+        f"files committed under a data folder's old name: {sorted(set(tracked) - set(copies))[:5]}"

@@ -131,7 +131,7 @@ def test_seed_findings_score_each_seed_on_the_registered_subset_and_pool_the_fam
 
     def run(p, seed, rng):  # a complete ID run of one seed: 50 episodes a task, success with probability p
         return [{"suite": "object_soft", "task_id": t, "condition": "id", "seed": 50_000_000 + 1000 * t + i,
-                 "policy": "baselines/policies/x.pt", "success": bool(ok), "dsr_success": bool(ok)}
+                 "policy": "campaign-data/policies/x.pt", "success": bool(ok), "dsr_success": bool(ok)}
                 for t in range(10) for i, ok in enumerate(rng.random(50) < p)]
 
     rng = np.random.default_rng(0)

@@ -31,7 +31,7 @@ def _synthetic_window(cfg, model, rng: np.random.Generator, batch: int) -> dict:
     return obs
 
 
-def dp_inference(policy: str | Path = "baselines/policies/vt-c-cpu.pt") -> dict:
+def dp_inference(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt") -> dict:
     """A committed policy's action chunk for a fixed observation window (one thread, as evaluated)."""
     import torch
 

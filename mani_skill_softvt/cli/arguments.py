@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..provenance import current_data_path
+from ..provenance import moved_data_path
 
 
 def existing_path(path: Path, flag: str) -> Path:
@@ -14,10 +14,8 @@ def existing_path(path: Path, flag: str) -> Path:
     folder's new name, that file, with a note on stderr; else ``path`` unchanged, for the command's own
     'does not exist' error."""
     path = Path(path)
-    if path.exists():
-        return path
-    moved = current_data_path(path.as_posix())
-    if moved is not None and Path(moved).exists():
+    moved = moved_data_path(path.as_posix())
+    if moved is not None:
         print(f"note: {flag} {path}: that folder was renamed; reading {moved}", file=sys.stderr)
         return Path(moved)
     return path

@@ -21,6 +21,7 @@ imports neither, and any package can add its own kind the same way.
 from __future__ import annotations
 
 import importlib
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
@@ -29,6 +30,7 @@ import numpy as np
 
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
 from ..observations import TCP_POSE, lookup
+from ..provenance import moved_data_path
 from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
 from ..actions import base_frame_pose
 
@@ -144,8 +146,14 @@ def policy_kind(name: str) -> PolicyKind:
 
 def resolve_policy(spec: str) -> PolicySource:
     """The :class:`PolicySource` of ``spec``: tried on the built-in names, then the registered kinds
-    (``ws://`` servers, policy files), then ``module:Class``; ValueError naming the spec for one no kind takes."""
+    (``ws://`` servers, policy files), then ``module:Class``; ValueError naming the spec for one no kind takes.
+    A policy file named in its folder's old spelling (``baselines/policies/...``) is read where it lies
+    now, with a note on stderr."""
     spec = str(spec)
+    moved = moved_data_path(spec)
+    if moved is not None:
+        _note_moved(spec, moved)
+        spec = moved
     for kind in _OWN_KINDS:
         if kind.matches(spec):
             return kind.resolve(spec)
@@ -162,6 +170,11 @@ def resolve_policy(spec: str) -> PolicySource:
                      f"file an installed policy kind reads (registered: {registered or 'none'}; a trained baseline's .pt "
                      "is read once the campaign is installed: pip install -e campaign, as scripts/setup.sh does)"
                      + (f"; kinds that failed to load: {', '.join(broken)}" if broken else ""))
+
+
+@lru_cache(maxsize=None)  # once a process and path: a run resolves its policy in every worker
+def _note_moved(spec: str, moved: str) -> None:
+    print(f"note: policy {spec}: that folder was renamed; reading {moved}", file=sys.stderr)
 
 
 def load_policy(spec: str) -> Policy:

@@ -42,6 +42,7 @@ from ..numerics import chosen as chosen_numerics
 from ..numerics import numerics_of, resolved
 from ..observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
+from ..provenance import current_data_path, moved_data_path, same_data_path
 from ..rollout import Observer, rollout
 from ..stack import software_stack
 from ..tasks.suites import get_suite
@@ -74,7 +75,8 @@ def recorded_obs_modes(path: Path, run: RunConfig) -> set[str]:
 
 
 def is_run_record(rec: dict, fields: dict, policy_sha256: str | None) -> bool:
-    return all(rec.get(k) == v for k, v in fields.items()) and \
+    # A policy file named in its folder's old spelling (records made before the rename) is the same file.
+    return all(same_data_path(rec.get(k), v) if k == "policy" else rec.get(k) == v for k, v in fields.items()) and \
         rec.get("policy_sha256", policy_sha256) == policy_sha256
 
 
@@ -251,6 +253,8 @@ def record_differences(stored: dict, new: dict) -> list[str]:
         if k in NOT_REPRODUCED or (k in ADDED_FIELDS and k not in stored):
             continue
         a, b = stored.get(k), new.get(k)
+        if k == "policy" and same_data_path(a, b):  # one file, named before and after its folder's rename
+            continue
         if isinstance(a, dict) and isinstance(b, dict):
             inner = record_differences({f: v for f, v in a.items() if f not in NOT_COMPARED_IN_RECEIPT},
                                        {f: v for f, v in b.items() if f not in NOT_COMPARED_IN_RECEIPT})
@@ -278,7 +282,9 @@ def single_run(records: list[dict], path: Path) -> str | None:
     """Check that ``records`` (of ``path``) are of one run (policy, modes, camera size, policy
     file) and hold each episode once; the run's policy file hash (None for other policies)."""
     # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
-    runs = {json.dumps([r.get(k) for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
+    # A policy path in a renamed folder's old spelling names the file its new spelling does.
+    runs = {json.dumps([(current_data_path(r.get(k)) or r.get(k)) if k == "policy" else r.get(k)
+                        for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
     hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
     if len(runs) > 1 or len(hashes) > 1:
         raise ValueError(f"{path} holds records of {max(len(runs), len(hashes))} run configurations (policy, modes, "
@@ -305,6 +311,8 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
     sha = single_run(records, path)
     first = records[0]
     spec = first["policy"]
+    if sha is not None:  # a committed policy the records name by its folder's old spelling is read where it lies now
+        spec = moved_data_path(spec) or spec
     if sha is not None and not Path(spec).is_file():
         raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
                          "name it from (the repository root for committed policies)")

@@ -1,6 +1,6 @@
 """Export a trained baseline for the repository: its weights in float16, at most 20 MiB.
 
-    python -m softvt_campaign.baselines.export RUN/policy.pt baselines/policies/vo-c-cpu.pt --if-changed
+    python -m softvt_campaign.baselines.export RUN/policy.pt campaign-data/policies/vo-c-cpu.pt --if-changed
 
 The exported file is a ``policy.pt`` like the one training writes (``evaluate --policy`` loads
 it, and the evaluator names its records after the file: ``object_soft_id_vo-c-cpu``), with the
@@ -65,7 +65,7 @@ def main(argv=None) -> Path:
     ap = argparse.ArgumentParser(prog="python -m softvt_campaign.baselines.export", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("source", type=Path, help="a policy.pt (or snapshot) written by training")
-    ap.add_argument("dest", type=Path, help="the exported file, e.g. baselines/policies/vo-c-cpu.pt")
+    ap.add_argument("dest", type=Path, help="the exported file, e.g. campaign-data/policies/vo-c-cpu.pt")
     ap.add_argument("--max-mib", type=float, default=MAX_MIB)
     ap.add_argument("--if-changed", action="store_true", help="leave a destination exported from the same source as it is")
     args = ap.parse_args(argv)

@@ -1,8 +1,8 @@
 """How trained policies close the gripper over an episode, beside the expert's closure for the same seed.
 
-    python -m softvt_campaign.studies.closure baselines/policies/vo-c-cpu.pt \
-        baselines/policies/vt-c-cpu.pt --task 3 --episodes 6 --out campaign-data/results
-    python -m softvt_campaign.studies.closure baselines/policies/object_rigid/vo-c-cpu.pt \
+    python -m softvt_campaign.studies.closure campaign-data/policies/vo-c-cpu.pt \
+        campaign-data/policies/vt-c-cpu.pt --task 3 --episodes 6 --out campaign-data/results
+    python -m softvt_campaign.studies.closure campaign-data/policies/object_rigid/vo-c-cpu.pt \
         --suite object_rigid --task 7 --episodes 10 --demos $SOFTVT_DEMOS_DIR --out campaign-data/results
 
 The scripted expert draws one closure per episode, uniform in the object's calibrated envelope

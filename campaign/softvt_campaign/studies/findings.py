@@ -13,7 +13,7 @@ variants, VT-C's OOD); the Object-Soft ID records and VO-C's OOD ones were in be
 
 The rules.
 
-- A policy is its file's name (``vo-c-cpu``: ``baselines/policies/[<suite>/]vo-c-cpu.pt``); a
+- A policy is its file's name (``vo-c-cpu``: ``campaign-data/policies/[<suite>/]vo-c-cpu.pt``); a
   file named ``<name>-seed<N>.pt`` is training seed N of the same policy.
 - Only complete runs are judged: all 500 ID episodes (all 900 OOD ones). A partial run is shown
   as it stands, its claims ``missing``.
