@@ -310,13 +310,14 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
         raise ValueError(f"{path}: no records to reproduce")
     sha = single_run(records, path)
     first = records[0]
+    # A committed policy the records name by its folder's old spelling is read where it lies now
+    # (RunConfig.resolve says so on stderr).
     spec = first["policy"]
-    if sha is not None:  # a committed policy the records name by its folder's old spelling is read where it lies now
-        spec = moved_data_path(spec) or spec
-    if sha is not None and not Path(spec).is_file():
+    here = (moved_data_path(spec) or spec) if sha is not None else spec
+    if sha is not None and not Path(here).is_file():
         raise ValueError(f"{path}: its policy file {spec} does not exist here; run from the directory the records "
                          "name it from (the repository root for committed policies)")
-    if sha is not None and file_sha256(Path(spec)) != sha:
+    if sha is not None and file_sha256(Path(here)) != sha:
         raise ValueError(f"{path}: {spec} is not the policy file these records were made with (its SHA-256 "
                          f"differs from their policy_sha256 {sha[:12]}...): it was replaced or retrained")
     size = first.get("camera_size")
