@@ -308,14 +308,16 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
     numerics = (record.get("receipt") or {}).get("numerics")
     if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
         return None
-    if numerics and numerics.get("pinned"):  # the earlier pins: all but MKL's vendor-dependent branch
+    if numerics and numerics_of(record) == PINNED_MKL_AVX2:  # the earlier pins: all but MKL's vendor-dependent branch
         made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
         here = stack.get("cpu") or "unknown"
         same = _vendor(made) is not None and _vendor(made) == _vendor(here)
         return (f"the records were made under the earlier pins ({PINNED_MKL_AVX2}), whose MKL branch depends on the "
                 f"CPU's vendor, on {made}; this machine is {here}: "
-                + ("of the same vendor, so they replay bit for bit" if same else
-                   "their policy's float32 products may round otherwise here, and their outcomes may differ"))
+                + ("of the same vendor, where they are expected to replay bit for bit (on AMD, MKL's branch is its "
+                   "AUTO one, measured on one AMD EPYC kind only)" if same else
+                   "a policy's float32 products may round otherwise here (the expert's use no MKL), and their "
+                   "outcomes may differ"))
     made = (record.get("receipt") or {}).get("stack") or {}
     if not made.get("cpu") and known and known.get("cpu"):
         made = {"cpu": known["cpu"], "cpu-isa": known.get("cpu-isa")}

@@ -1008,7 +1008,7 @@ def test_closure_refuses_bad_input_before_running_anything(tmp_path, capsys, arg
 
     policy = tmp_path / "p.pt"
     policy.write_bytes(b"")  # never read: the range checks come before the policy file is needed
-    committed = Path(__file__).resolve().parents[1] / "baselines" / "policies" / "vo-c-cpu.pt"
+    committed = Path(__file__).resolve().parents[1] / "campaign-data" / "policies" / "vo-c-cpu.pt"
     argv = [a.format(policy=policy, committed=committed) for a in args]
     with pytest.raises(SystemExit):
         closure.main(argv)

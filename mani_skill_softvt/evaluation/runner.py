@@ -192,12 +192,12 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
     done = run_records(out, run)
     wanted = numerics or chosen_numerics().name
     known = sidecar(out) if done else None  # read once, not per record
+    todo = [ep for ep in episodes if episode_key(ep) not in done]
     made = sorted({numerics_of(r, known) for r in done.values()} - {wanted})
-    if made:  # one file, one numerics: a reproduction replays a file under one
+    if made and todo:  # one file, one numerics (a complete file is read as it is, whatever it was made under)
         raise ValueError(f"{out} holds records of this run made under numerics {', '.join(made)}, and this process "
                          f"runs {wanted}: evaluate into another --out, or set SOFTVT_NUMERICS={made[0]} to complete "
                          "them as they were made (docs/install.md, numerics)")
-    todo = [ep for ep in episodes if episode_key(ep) not in done]
     if progress is not None:
         progress(len(episodes) - len(todo))
     # A dead worker takes its batch's later episodes with it: run the rest again. Every death

@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_json
-from ..numerics import machine_kind
+from ..numerics import machine_kind, numerics_of
 
 PROVENANCE_FILE = "provenance.json"
 
@@ -47,7 +47,8 @@ def machine(records: list[dict], entry: dict | None = None) -> str:
 
 def numerics(records: list[dict], entry: dict | None = None) -> str:
     """The numerics a file's records name, else the sidecar's, else ``native (before the pins)``."""
-    named = {((r.get("receipt") or {}).get("numerics") or {}).get("name") for r in records} - {None}
+    # numerics_of: records of the earlier pins carry today's name, and their MKL variable tells them apart.
+    named = {numerics_of(r) for r in records if (r.get("receipt") or {}).get("numerics")}
     if named:
         return "; ".join(sorted(named))
     if entry and entry.get("numerics"):
