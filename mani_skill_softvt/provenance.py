@@ -50,11 +50,15 @@ def current_data_path(path) -> str | None:
     return None
 
 
+def today_data_path(path):
+    """``path`` as spelled today: its renamed folder's new name, else ``path`` itself (any value)."""
+    return (current_data_path(path) or path) if isinstance(path, str) else path
+
+
 def same_data_path(a, b) -> bool:
     """Whether ``a`` and ``b`` name one file, either in a renamed folder's old spelling or its new one
     (two records of one run, one made before the rename); anything else compares as it is."""
-    return a == b or (isinstance(a, str) and isinstance(b, str)
-                      and (current_data_path(a) or a) == (current_data_path(b) or b))
+    return today_data_path(a) == today_data_path(b)
 
 
 def moved_data_path(path) -> str | None:

@@ -42,7 +42,7 @@ from ..numerics import chosen as chosen_numerics
 from ..numerics import numerics_of, resolved
 from ..observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
-from ..provenance import current_data_path, moved_data_path, same_data_path
+from ..provenance import moved_data_path, same_data_path, today_data_path
 from ..rollout import Observer, rollout
 from ..stack import software_stack
 from ..tasks.suites import get_suite
@@ -283,7 +283,7 @@ def single_run(records: list[dict], path: Path) -> str | None:
     file) and hold each episode once; the run's policy file hash (None for other policies)."""
     # As in run_records, a record from before the policy's hash was kept belongs to the run of its file.
     # A policy path in a renamed folder's old spelling names the file its new spelling does.
-    runs = {json.dumps([(current_data_path(r.get(k)) or r.get(k)) if k == "policy" else r.get(k)
+    runs = {json.dumps([today_data_path(r.get(k)) if k == "policy" else r.get(k)
                         for k in RUN_FIELDS if k != "policy_sha256"]) for r in records}
     hashes = {r["policy_sha256"] for r in records if r.get("policy_sha256")}
     if len(runs) > 1 or len(hashes) > 1:

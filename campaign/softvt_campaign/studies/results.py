@@ -37,7 +37,7 @@ from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.report import rt_series
 from mani_skill_softvt.evaluation.run import policy_tag
 from mani_skill_softvt.fileio import atomic_write, atomic_write_json
-from mani_skill_softvt.provenance import current_data_path
+from mani_skill_softvt.provenance import today_data_path
 from mani_skill_softvt.tasks.suites import get_suite, task_spec
 
 # The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
@@ -65,13 +65,10 @@ def group_labels(records: list[dict], legacy: bool = False) -> list[str]:
     hash's start where files of one name differ, and ``[old physics]`` for legacy records."""
     # A worker_died record names no variant (its policy never ran): it takes that of its file's other records.
     # Keyed by the policy path as it is spelled today: a file's old records name baselines/policies/.
-    def path(r):
-        return current_data_path(r["policy"]) or r["policy"]
-
-    named = {path(r): variant_of(r) for r in records if r["receipt"].get("policy")}
+    named = {today_data_path(r["policy"]): variant_of(r) for r in records if r["receipt"].get("policy")}
 
     def base(r):
-        label = variant_of(r) if r["receipt"].get("policy") else named.get(path(r), variant_of(r))
+        label = variant_of(r) if r["receipt"].get("policy") else named.get(today_data_path(r["policy"]), variant_of(r))
         return f"{label} ({policy_tag(r['policy'])})" if str(r["policy"]).endswith(".pt") else label
 
     # Files of one name on different suites (a variant and its rigid-twin training) are rows of
