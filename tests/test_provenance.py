@@ -120,9 +120,4 @@ def test_the_checkout_keeps_its_data_in_folders_no_package_can_be_named(tmp_path
     old = [o.rstrip("/") for o in provenance.RENAMED_DATA_FOLDERS]
     tracked = subprocess.run(["git", "ls-files", "--", *old], cwd=REPO_DIR, capture_output=True, text=True,
                              check=True).stdout.split()
-    # The policies' 147 MB move in two submissions (docs/baselines.md): until the second deletes them,
-    # the old folder may hold only copies of what the new one holds.
-    copies = [t for t in tracked if t.startswith("baselines/policies/")
-              and file_sha256(REPO_DIR / t) == file_sha256(REPO_DIR / provenance.current_data_path(t))]
-    assert sorted(set(tracked) - set(copies)) == [], \
-        f"files committed under a data folder's old name: {sorted(set(tracked) - set(copies))[:5]}"
+    assert tracked == [], f"files committed under a data folder's old name: {tracked[:5]}"
