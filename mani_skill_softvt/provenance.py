@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import posixpath
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,8 +58,14 @@ def today_data_path(path):
 
 def same_data_path(a, b) -> bool:
     """Whether ``a`` and ``b`` name one file, either in a renamed folder's old spelling or its new one
-    (two records of one run, one made before the rename); anything else compares as it is."""
-    return today_data_path(a) == today_data_path(b)
+    (two records of one run, one made before the rename), however the relative path is written
+    (``./x``, ``x``, ``a/../x``); anything that is not a string compares as it is."""
+    return _spelling(a) == _spelling(b)
+
+
+def _spelling(path):
+    """``path`` as spelled today, normalised ('/'-separated, no ``.`` or ``..`` parts); any other value as it is."""
+    return today_data_path(posixpath.normpath(path.replace("\\", "/"))) if isinstance(path, str) else path
 
 
 def moved_data_path(path) -> str | None:

@@ -86,6 +86,8 @@ def test_a_policy_named_by_its_folders_old_spelling_is_one_file_with_its_new_one
     old, new = "baselines/policies/vo-c-cpu.pt", "campaign-data/policies/vo-c-cpu.pt"
     assert same_data_path(old, new) and same_data_path("./" + old, new) and same_data_path(None, None)
     assert not same_data_path(old, "campaign-data/policies/vt-c-cpu.pt") and not same_data_path(old, None)
+    assert same_data_path("./campaign-data/results/x.jsonl", "campaign-data/results/x.jsonl")
+    assert same_data_path("runs/../baselines/policies/vo-c-cpu.pt", new)
     rec = {"policy": old, "obs_mode": "rgb", "policy_sha256": "ab", "suite": "object_soft", "task_id": 0,
            "condition": "id", "seed": 1, "success": True}
     assert is_run_record(rec, {"policy": new, "obs_mode": "rgb"}, "ab")

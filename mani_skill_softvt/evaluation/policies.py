@@ -27,6 +27,7 @@ from functools import lru_cache
 from importlib import metadata
 
 import numpy as np
+from tqdm import tqdm
 
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
 from ..observations import TCP_POSE, lookup
@@ -174,7 +175,8 @@ def resolve_policy(spec: str) -> PolicySource:
 
 @lru_cache(maxsize=None)  # once a process and path: a run resolves its policy in every worker
 def _note_moved(spec: str, moved: str) -> None:
-    print(f"note: policy {spec}: that folder was renamed; reading {moved}", file=sys.stderr)
+    # tqdm.write: a run's progress bar may be on screen; the note goes above it, not onto its line
+    tqdm.write(f"note: policy {spec}: that folder was renamed; reading {moved}", file=sys.stderr)
 
 
 def load_policy(spec: str) -> Policy:
