@@ -134,7 +134,7 @@ def policy_costs(variant: str, obs, calls: int) -> tuple[float, float, int]:
     from softvt_campaign.baselines.features import frame_features
     from softvt_campaign.baselines.model import DiffusionPolicyModel, noise_scheduler
     from softvt_campaign.baselines.train import empty_stats
-    from mani_skill_softvt.observations import flatten_batch
+    from mani_skill_softvt.contracts.observations import flatten_batch
 
     torch.set_num_threads(1)
     cfg = make_config(variant)

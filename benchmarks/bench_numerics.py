@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_numerics.py [--steps 20] [--frames 30]
 
 Every row is measured under both numerics in the same run, each in a fresh process (the CPU
-dispatch is chosen as the libraries load; ``SOFTVT_NUMERICS``, mani_skill_softvt/numerics.py),
+dispatch is chosen as the libraries load; ``SOFTVT_NUMERICS``, mani_skill_softvt/provenance/numerics.py),
 the two alternating so that whatever else runs on the machine loads both alike:
 
 - ``soft episode``, ``rigid episode``: wall seconds per simulated second of the scripted expert on
@@ -56,7 +56,7 @@ def child(steps: int, frames: int) -> dict:
     from bench_episodes import expert_episode  # same directory
     from bench_train_step import time_setting
 
-    from mani_skill_softvt.numerics import resolved
+    from mani_skill_softvt.provenance.numerics import resolved
 
     torch.set_num_threads(1)
     out = {"numerics": resolved()["name"]}

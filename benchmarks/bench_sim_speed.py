@@ -29,7 +29,7 @@ def _time_steps(env, actions) -> float:
 def bench_softvt(obs_mode: str, steps: int, asset_id: str) -> float:
     import mani_skill_softvt.tasks  # noqa: F401
     from mani_skill_softvt.expert.grasp_script import GraspPlan
-    from mani_skill_softvt.actions import ee_action
+    from mani_skill_softvt.contracts.actions import ee_action
     from mani_skill_softvt.tasks.robot import mid_height_grasp
 
     env = gym.make("SoftGraspLift-v1", obs_mode=obs_mode, control_mode="pd_ee_pose", asset_id=asset_id,

@@ -80,7 +80,7 @@ def resting_drift(asset_id: str, seed: int, physics: dict, seconds: float = 2.0)
     import gymnasium as gym
 
     import mani_skill_softvt.tasks  # noqa: F401
-    from mani_skill_softvt.actions import ee_action
+    from mani_skill_softvt.contracts.actions import ee_action
 
     env = gym.make("SoftGraspLift-v1", obs_mode="state", control_mode="pd_ee_pose", asset_id=asset_id,
                    soft_sleep=False, physics=physics)

@@ -5,4 +5,7 @@ from .cli.compare import *  # noqa: F401,F403
 from .cli.compare import main  # noqa: F401
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.compare", "mani_skill_softvt.cli.compare", "softvt-compare")
     main()

@@ -2,7 +2,7 @@
 
 Two uses. A code move must not change one bit of what the code computes (``scripts/fingerprint.py
 --out before.json`` at the old commit, ``--compare`` at the new one); and under the pinned numerics
-(:mod:`mani_skill_softvt.numerics`) the same bits must come out on any x86-64 machine, which the
+(:mod:`mani_skill_softvt.provenance.numerics`) the same bits must come out on any x86-64 machine, which the
 default tests check against the committed goldens (``tests/golden/fingerprints.json``). The cases:
 
 - ``expert_soft`` / ``expert_rigid``: the scripted expert on Object-Soft / Object-Rigid task 3 in

@@ -5,4 +5,7 @@ from .cli.gallery import *  # noqa: F401,F403
 from .cli.gallery import main  # noqa: F401
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.gallery", "mani_skill_softvt.cli.gallery", "softvt-gallery")
     main()

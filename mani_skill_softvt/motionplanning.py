@@ -5,4 +5,7 @@ from .integrations.maniskill.motionplanning import *  # noqa: F401,F403
 from .integrations.maniskill.motionplanning import cli, main  # noqa: F401
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.motionplanning", "mani_skill_softvt.integrations.maniskill.motionplanning", "softvt-motionplanning")
     cli()

@@ -41,7 +41,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from queue import Empty
 
-from .numerics import chosen, environment
+from .provenance.numerics import chosen, environment
 
 RAY_INSTALL_HINT = "pip install 'mani-skill-softvt[ray]' (from a checkout: pip install -e '.[ray]')"
 # A work item is one core's job. A BLAS thread pool in each would spin against the other workers:
@@ -64,7 +64,7 @@ def run_tasks(fn: Callable, items: Sequence[tuple], workers: int = 1, ray_addres
     here, after the messages it put before failing were yielded. A work item whose process dies
     (SIGKILL, out of memory, a segfault in native code) raises :class:`WorkerDiedError`, or with
     ``report_deaths`` yields ``("died", (index_in_items, reason))`` while the other items go on.
-    ``numerics`` (:mod:`mani_skill_softvt.numerics`): the numerics the work items run under; None,
+    ``numerics`` (:mod:`mani_skill_softvt.provenance.numerics`): the numerics the work items run under; None,
     this process's (the pins, unless ``SOFTVT_NUMERICS`` chose otherwise).
     """
     if not items:
@@ -197,7 +197,7 @@ def _run_local(fn: Callable, items: Sequence[tuple], workers: int,
 def _worker_environment(numerics: str):
     """The environment a spawned worker starts with (it reads it as it imports numpy and torch): one
     BLAS and OpenMP thread unless the caller chose otherwise, and the variables of ``numerics``
-    (:func:`mani_skill_softvt.numerics.environment`); this process's own is restored after."""
+    (:func:`mani_skill_softvt.provenance.numerics.environment`); this process's own is restored after."""
     with _ENV_LOCK:
         wanted = {**{v: "1" for v in WORKER_THREAD_VARS if v not in os.environ}, **environment(numerics)}
         saved = {v: os.environ.get(v) for v in wanted}

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from mani_skill.utils.common import to_numpy
 
-from .observations import as_bool, info_bool
+from .contracts.observations import as_bool, info_bool
 from .physics.errors import SimulationInstabilityError
-from .policy import is_privileged
+from .contracts.policy import is_privileged
 
 UNTIL = ("episode", "plan", "script")
 MAX_ERROR_CHARS = 2000

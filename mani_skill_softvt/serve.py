@@ -5,4 +5,7 @@ from .integrations.openpi.serve import *  # noqa: F401,F403
 from .integrations.openpi.serve import main  # noqa: F401
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.serve", "mani_skill_softvt.integrations.openpi.serve", "softvt-serve")
     main()

@@ -5,4 +5,7 @@ from .cli.warmup import *  # noqa: F401,F403
 from .cli.warmup import main  # noqa: F401
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.warmup", "mani_skill_softvt.cli.warmup", "softvt-warmup")
     main()

@@ -6,7 +6,7 @@ checking a code move bit for bit on one machine:
     .venv/bin/python scripts/fingerprint.py --out before.json              # at the old commit
     .venv/bin/python scripts/fingerprint.py --compare before.json          # at the new one: exit 1 on a difference
 
-Under the pinned numerics (the default; mani_skill_softvt/numerics.py) the fingerprints are the
+Under the pinned numerics (the default; mani_skill_softvt/provenance/numerics.py) the fingerprints are the
 same on any x86-64 machine; ``tests/test_numerics.py`` checks them against the committed goldens.
 ``SOFTVT_NUMERICS=native`` fingerprints each library's own CPU dispatch, which holds on one machine
 kind only.
@@ -21,8 +21,8 @@ from pathlib import Path
 
 from mani_skill_softvt.fingerprints import CASES as LIBRARY_CASES, policy_record
 from softvt_campaign.fingerprints import CASES as BASELINE_CASES
-from mani_skill_softvt.numerics import machine_kind, resolved
-from mani_skill_softvt.stack import software_stack
+from mani_skill_softvt.provenance.numerics import machine_kind, resolved
+from mani_skill_softvt.provenance.stack import software_stack
 
 CASES = {**LIBRARY_CASES, **BASELINE_CASES}
 DEFAULT_CASES = ["expert_soft", "expert_rigid", "tactile_frame", "dp_inference", "dp_training", "calibration_trial",

@@ -1,7 +1,7 @@
 """What moves the bits: each part of the numerics pinned alone, from this machine's native dispatch.
 
 Runs ``scripts/fingerprint.py`` once with every library's own CPU dispatch (``native``), once per
-part of :data:`mani_skill_softvt.numerics.PARTS` pinned alone (``x86-64-v3:<part>``), and once with
+part of :data:`mani_skill_softvt.provenance.numerics.PARTS` pinned alone (``x86-64-v3:<part>``), and once with
 all of them pinned (``x86-64-v3``), each in a fresh process (the variables are read as the libraries
 load), and prints which fingerprint each changes against native: on a machine whose native dispatch
 is x86-64-v3 (AVX2, FMA) nothing moves; on an AVX-512 machine the parts that dispatch by ISA do.
@@ -20,7 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from mani_skill_softvt.numerics import NATIVE, NUMERICS_ENV, PARTS, PINNED
+from mani_skill_softvt.provenance.numerics import NATIVE, NUMERICS_ENV, PARTS, PINNED
 
 ROOT = Path(__file__).resolve().parent.parent
 COLUMNS = {"expert_soft": ("states", "rgb", "tactile"), "expert_rigid": ("states", "rgb", "tactile"),

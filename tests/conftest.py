@@ -3,7 +3,7 @@
 import pytest
 
 # Before any test module loads NumPy or torch: the package's import pins their CPU dispatch
-# (mani_skill_softvt/numerics.py), so the tests run under the numerics every record names.
+# (mani_skill_softvt/provenance/numerics.py), so the tests run under the numerics every record names.
 import mani_skill_softvt  # noqa: F401
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.evaluation.policies import HoldPolicy
-from mani_skill_softvt.actions import ee_action
+from mani_skill_softvt.contracts.actions import ee_action
 
 TASK = 3
 CRUSH_TARGET_ENV = "SOFTVT_TEST_CRUSH_TARGET"  # "x,y,z_top" of the object at the crushing episode

@@ -116,7 +116,7 @@ def test_malformed_cards_are_refused_with_the_file_name(tmp_path):
 
 def test_committed_cards_and_sweep_logs_match_the_current_physics():
     from mani_skill_softvt.fileio import read_jsonl
-    from mani_skill_softvt.physics.constants import physics_signature
+    from mani_skill_softvt.physics.config import physics_signature
 
     for asset_id in CARDS:
         assert load_calibration_card(asset_id).data["physics"] == physics_signature()
@@ -128,7 +128,7 @@ def test_a_sweep_log_from_other_physics_is_refused_and_restart_sets_it_aside(tmp
     from mani_skill_softvt.expert.calibration_trials import set_aside
     from mani_skill_softvt.expert.calibration_trials import sweep_asset
     from mani_skill_softvt.fileio import append_jsonl, read_jsonl
-    from mani_skill_softvt.physics.constants import physics_signature
+    from mani_skill_softvt.physics.config import physics_signature
 
     log = tmp_path / ".sweeps" / "soft_stw_cube_hq.jsonl"
     trial = {"closure": 0.5, "repeat": 0, "held": True, "physics": {**physics_signature(), "VBD_ITERATIONS": 3.0}}

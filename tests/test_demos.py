@@ -37,7 +37,7 @@ def test_generation_writes_maniskill_trajectories_with_evaluator_stream(dataset)
         assert traj["success"][-1] and ep_meta["elapsed_steps"] == t
     manifest = json.loads((out / "object_soft" / "manifest.json").read_text())
     assert manifest["train_seeds"]["3"][1] < manifest["id_eval_seeds"]["3"][0]
-    from mani_skill_softvt.physics.constants import physics_signature
+    from mani_skill_softvt.physics.config import physics_signature
 
     assert manifest["physics"] == physics_signature()
 
@@ -323,7 +323,7 @@ def test_a_rigid_twins_touch_renders_from_its_stored_states_as_the_live_episode_
     recorded pad force holds the twin."""
     from mani_skill_softvt.demonstrations.render import render_observations
     from mani_skill_softvt.evaluation.wrapper import make_env
-    from mani_skill_softvt.observations import flatten_batch
+    from mani_skill_softvt.contracts.observations import flatten_batch
     from mani_skill_softvt.paths import REPO_DIR
 
     src, size = REPO_DIR / "demo-data" / "sample" / "object_rigid" / "task3.h5", (16, 16)
@@ -526,7 +526,7 @@ def test_a_rendering_killed_mid_task_keeps_its_finished_parts_and_resumes_to_the
 
 def test_the_committed_samples_were_recorded_under_the_current_physics():
     from mani_skill_softvt.paths import REPO_DIR
-    from mani_skill_softvt.physics.constants import physics_signature
+    from mani_skill_softvt.physics.config import physics_signature
 
     for suite in ("object_soft", "object_rigid"):
         manifest = json.loads((REPO_DIR / "demo-data" / "sample" / suite / "manifest.json").read_text())

@@ -112,8 +112,8 @@ def test_a_replaced_policy_file_is_refused_before_anything_runs(tmp_path):
 def test_evaluate_takes_every_control_mode_and_obs_mode_the_env_declares():
     # The modes are declared once (the action contract; the observation contract's parser, the env's);
     # evaluation reads them. With no obs mode named, a policy that names none runs in the env's default.
-    from mani_skill_softvt.actions import CONTROL_MODES
-    from mani_skill_softvt.observations import DEFAULT_OBS_MODE, OBS_MODES
+    from mani_skill_softvt.contracts.actions import CONTROL_MODES
+    from mani_skill_softvt.contracts.observations import DEFAULT_OBS_MODE, OBS_MODES
 
     for mode in CONTROL_MODES:
         assert RunConfig.resolve("random", control_mode=mode).control_mode == mode

@@ -9,7 +9,7 @@ import pytest
 
 import mani_skill_softvt.tasks  # noqa: F401
 from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
-from mani_skill_softvt.actions import ee_action
+from mani_skill_softvt.contracts.actions import ee_action
 from mani_skill_softvt.tasks import constants as C
 
 
@@ -140,7 +140,7 @@ def test_an_action_given_as_a_list_steps_like_the_same_array(env):
 
 
 def test_closure_and_binary_gripper_encodings(env):
-    from mani_skill_softvt.actions import closure_to_q, q_to_closure
+    from mani_skill_softvt.contracts.actions import closure_to_q, q_to_closure
 
     assert closure_to_q(0.0) == C.GRIPPER_Q_OPEN and closure_to_q(1.0) == C.GRIPPER_Q_CLOSED
     assert q_to_closure(closure_to_q(0.37)) == pytest.approx(0.37)

@@ -35,7 +35,8 @@ ALIASES = {"mani_skill_softvt.motionplanning", "mani_skill_softvt.replay", "mani
            "mani_skill_softvt.evaluation.maniskill_dp", "mani_skill_softvt.baselines", "mani_skill_softvt.studies",
            "mani_skill_softvt.evaluate", "mani_skill_softvt.compare", "mani_skill_softvt.gallery",
            "mani_skill_softvt.warmup", "mani_skill_softvt.grasp_demo", "mani_skill_softvt.calibrate", "mani_skill_softvt.demos",
-           "mani_skill_softvt.campaign_alias"}
+           "mani_skill_softvt.campaign_alias", "mani_skill_softvt.policy", "mani_skill_softvt.observations",
+           "mani_skill_softvt.actions", "mani_skill_softvt.numerics", "mani_skill_softvt.stack"}
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -80,15 +81,17 @@ def test_the_env_reaches_its_objects_only_through_the_object_interface():
 
 def test_the_action_contract_needs_no_simulator():
     """A policy, a converter or a data file reads actions (modes, gripper encodings, the base frame)
-    without ManiSkill's agent: actions.py imports only the pure transforms."""
-    assert imports_any(PACKAGE / "actions.py", SIMULATORS) == []
-    modules = {m for m in imports_any(PACKAGE / "actions.py", ("mani_skill_softvt",)) if m in MODULES}
+    without ManiSkill's agent: contracts/actions.py imports only the pure transforms."""
+    assert imports_any(PACKAGE / "contracts/actions.py", SIMULATORS) == []
+    modules = {m for m in imports_any(PACKAGE / "contracts/actions.py", ("mani_skill_softvt",)) if m in MODULES}
     assert modules == {"mani_skill_softvt.physics.transforms", "mani_skill_softvt.provenance"}
 
 
 def test_provenance_imports_nothing_of_the_package():
-    """Every module that writes or reads a file may take its markers from provenance.py."""
-    assert imports_any(PACKAGE / "provenance.py", ("mani_skill_softvt",)) == []
+    """Every module that writes or reads a file may take its markers from provenance/; the numerics are
+    pinned from there before anything else loads, so neither imports anything of the package."""
+    for module in ("provenance/__init__.py", "provenance/numerics.py"):
+        assert imports_any(PACKAGE / module, ("mani_skill_softvt",)) == [], module
     for consumer in (PACKAGE / "evaluation/policies.py", CAMPAIGN / "baselines/features.py",
                      PACKAGE / "integrations/openpi/remote.py"):
         assert "mani_skill_softvt.tasks.robot" not in imported_modules(consumer), consumer
@@ -102,7 +105,7 @@ def test_handling_a_blow_up_needs_no_fem(module):
 
 
 def test_the_policy_contract_imports_nothing_of_the_package():
-    assert imports_any(PACKAGE / "policy.py", ("mani_skill_softvt",)) == []
+    assert imports_any(PACKAGE / "contracts/policy.py", ("mani_skill_softvt",)) == []
 
 
 def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
@@ -111,7 +114,7 @@ def test_galleries_are_commands_not_part_of_the_concepts_they_picture():
         assert imports_any(path, ("mani_skill_softvt.cli.gallery", "mani_skill_softvt.gallery")) == [], path
 
 
-# Observation keys are spelled in the contract (mani_skill_softvt/observations.py) and nowhere a
+# Observation keys are spelled in the contract (mani_skill_softvt/contracts/observations.py) and nowhere a
 # consumer reads them.
 CONSUMERS = [PACKAGE / m for m in ("integrations/openpi/remote.py", "integrations/openpi/serve.py",
                                     "integrations/lerobot/export.py", "evaluation/videos.py", "demonstrations/render.py",
@@ -125,7 +128,7 @@ KEY_SPELLINGS = ('"agent/qpos"', '"extra/tcp_pose"', "sensor_data/", '"tactile/'
 def test_consumers_take_observation_keys_from_the_contract(module):
     source = module.read_text()
     assert [k for k in KEY_SPELLINGS if k in source] == []
-    assert "mani_skill_softvt.observations" in imported_modules(module)
+    assert "mani_skill_softvt.contracts.observations" in imported_modules(module)
 
 
 def test_one_flattener_and_one_info_reader():
@@ -223,7 +226,7 @@ def test_the_core_library_imports_no_integration():
     packages never reach up into them: the commands and the baselines may use them."""
     core = ("assets", "physics", "tactile", "calibration", "tasks", "expert", "data", "evaluation", "demonstrations",
             "rollout",
-            "observations", "policy", "parallel", "numerics", "fileio", "paths", "version", "stack")
+            "contracts", "provenance", "parallel", "fileio", "paths", "version", "settings")
     for name, deps in _module_graph().items():
         if name != "mani_skill_softvt" and name.split(".")[1] in core:
             assert not [d for d in deps if d.startswith("mani_skill_softvt.integrations")], name
@@ -255,3 +258,14 @@ def test_the_campaign_has_no_cycle_and_reaches_the_library_only_through_its_publ
     for name, path in CAMPAIGN_MODULES.items():
         assert not [m for m in imported_modules(path) if m.startswith("mani_skill_softvt") and
                     any(part.startswith("_") and not part.startswith("__") for part in m.split("."))], name
+
+
+@pytest.mark.parametrize("old,new", [("policy", "contracts.policy"), ("observations", "contracts.observations"),
+                                     ("actions", "contracts.actions"), ("numerics", "provenance.numerics"),
+                                     ("stack", "provenance.stack")])
+def test_a_moved_module_is_its_old_path_for_one_release(old, new):
+    """Code (and a pickle) naming the old path gets the moved module itself, not a copy of it."""
+    import importlib
+
+    assert importlib.import_module(f"mani_skill_softvt.{old}") is importlib.import_module(f"mani_skill_softvt.{new}")
+    assert f"mani_skill_softvt.{new}" in (PACKAGE / f"{old}.py").read_text()

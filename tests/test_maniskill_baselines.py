@@ -95,12 +95,12 @@ def demos(tmp_path_factory) -> dict[str, Path]:
     # No "rgbd" in the path: train_rgbd.py expects depth images when its demo path contains it.
     work = tmp_path_factory.mktemp("user")
     py = sys.executable
-    _run([py, "-m", "mani_skill_softvt.motionplanning", "-e", ENV_ID, "-n", "1", "--only-count-success"], work)
+    _run([py, "-m", "mani_skill_softvt.integrations.maniskill.motionplanning", "-e", ENV_ID, "-n", "1", "--only-count-success"], work)
     mp = work / "demos" / ENV_ID / "motionplanning" / "task3.h5"
-    _run([py, "-m", "mani_skill_softvt.replay", "--traj-path", str(mp), "-c", "pd_ee_delta_pose", "-o", "rgb",
+    _run([py, "-m", "mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(mp), "-c", "pd_ee_delta_pose", "-o", "rgb",
           "--save-traj"], work)
     rgb = mp.with_name("task3.rgb.pd_ee_delta_pose.physx_cpu.h5")
-    _run([py, "-m", "mani_skill_softvt.replay", "--traj-path", str(rgb), "-o", "state", "--save-traj"], work)
+    _run([py, "-m", "mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(rgb), "-o", "state", "--save-traj"], work)
     return {"work": work, "rgb": rgb, "state": mp.with_name("task3.state.pd_ee_delta_pose.physx_cpu.h5")}
 
 
@@ -195,7 +195,7 @@ def _written_and_read(commands: list[str]) -> tuple[set[str], list[str]]:
             continue
         flag = lambda f, default=None: words[words.index(f) + 1] if f in words else default  # noqa: E731
         env = dict(w.split("=", 1) for w in words if "=" in w and w.split("=")[0].isupper())
-        if "mani_skill_softvt.motionplanning" in words:
+        if "mani_skill_softvt.integrations.maniskill.motionplanning" in words:
             suite, task = parse_env_id(flag("-e"))
             written.add(f"demos/{flag('-e')}/motionplanning/task{task if task is not None else flag('--task-id')}.h5")
         elif "--traj-path" in words:  # a replay (ManiSkill's module or ours): <name>.<obs>.<control>.physx_cpu.h5
@@ -221,7 +221,7 @@ def test_the_documented_commands_read_only_what_the_commands_before_them_write(d
 
     checked = 0
     for commands in _bash_blocks(REPO_DIR / doc):
-        if not any("mani_skill_softvt.motionplanning" in c for c in commands):
+        if not any("mani_skill_softvt.integrations.maniskill.motionplanning" in c for c in commands):
             continue  # the blocks that start from motion planning: every path they read, they made
         written, read = _written_and_read(commands)
         for path in read:

@@ -13,7 +13,7 @@ from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.physics.transforms import down_quat, down_rotvec, quat_angle
 from mani_skill_softvt.tasks import constants as C
-from mani_skill_softvt.actions import CONTROL_MODES, base_frame_pose, closure_to_q, gripper_action, normalized_gripper
+from mani_skill_softvt.contracts.actions import CONTROL_MODES, base_frame_pose, closure_to_q, gripper_action, normalized_gripper
 
 ENV_ID, TASK = "SoftVTObjectRigid-v1", 3
 OPEN_WIDTH, CLOSED_WIDTH = 2 * C.GRIPPER_Q_OPEN, 0.0  # jaw gap (m): 80 mm open; closed on nothing, the pads meet

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import mani_skill_softvt  # noqa: F401
-from mani_skill_softvt.actions import GRIPPER_ACTION_VERSION
+from mani_skill_softvt.contracts.actions import GRIPPER_ACTION_VERSION
 from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES, list_tasks
 
 RIGID = "SoftVTObjectRigid-v1"
@@ -132,7 +132,7 @@ def test_maniskill_replay_restores_the_recorded_states_and_renders_touch(mp_demo
 
 def test_replay_from_the_first_state_reproduces_the_episode(mp_demo, tmp_path):
     src = _copy(mp_demo, tmp_path)
-    _run("mani_skill_softvt.replay", "--traj-path", str(src), "--use-first-env-state", "-o", "state", "--save-traj")
+    _run("mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(src), "--use-first-env-state", "-o", "state", "--save-traj")
     dst = tmp_path / f"{src.stem}.state.pd_joint_pos.physx_cpu.h5"
     with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
         # Restoring the first state and replaying the actions is deterministic: the same states.
@@ -144,7 +144,7 @@ def test_replay_from_the_first_state_reproduces_the_episode(mp_demo, tmp_path):
 @pytest.mark.slow  # a rendered replay; ManiSkill's own replay of the same demo runs by default
 def test_delta_mode_replay_loads_like_maniskills_diffusion_policy_data(mp_demo, tmp_path):
     src = _copy(mp_demo, tmp_path)
-    _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", "pd_ee_delta_pose", "-o", "rgb", "--save-traj")
+    _run("mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(src), "-c", "pd_ee_delta_pose", "-o", "rgb", "--save-traj")
     dst = tmp_path / f"{src.stem}.rgb.pd_ee_delta_pose.physx_cpu.h5"
     meta = json.loads(dst.with_suffix(".json").read_text())
     # The baseline's --env-id is the json's: the task's own id (ManiSkill's RecordEpisode would record the bare one).
@@ -177,7 +177,7 @@ def test_delta_mode_replay_loads_like_maniskills_diffusion_policy_data(mp_demo, 
 @pytest.mark.parametrize("mode", ["pd_ee_pose", "pd_ee_pose_binary", "pd_joint_pos_binary", "pd_joint_delta_pos"])
 def test_replay_converts_into_every_control_mode(mp_demo, tmp_path, mode):
     src = _copy(mp_demo, tmp_path)
-    _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", mode, "--save-traj")
+    _run("mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(src), "-c", mode, "--save-traj")
     with h5py.File(tmp_path / f"{src.stem}.none.{mode}.physx_cpu.h5", "r") as f:
         assert f["traj_0/success"][-1]
         gripper = f["traj_0/actions"][:, -1]
@@ -193,7 +193,7 @@ def test_replay_converts_into_every_control_mode(mp_demo, tmp_path, mode):
 def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mode):
     from mani_skill.utils.wrappers.record import RecordEpisode
 
-    from mani_skill_softvt.actions import ee_action
+    from mani_skill_softvt.contracts.actions import ee_action
 
     env = RecordEpisode(gym.make(env_id, task_id=TASK, obs_mode=obs_mode, render_mode="rgb_array"), str(tmp_path),
                         trajectory_name="t",
@@ -270,7 +270,7 @@ def test_soft_joint_space_demo_converts_into_the_papers_action_space(tmp_path):
     res = main(["-e", "SoftVTObjectSoft-v1", "--task-id", str(TASK), "-n", "1", "--record-dir", str(tmp_path)])
     src = Path(res["path"])
     assert json.loads(src.with_suffix(".json").read_text())["episodes"][0]["success"]
-    _run("mani_skill_softvt.replay", "--traj-path", str(src), "-c", "pd_ee_pose", "--save-traj")
+    _run("mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(src), "-c", "pd_ee_pose", "--save-traj")
     dst = src.with_name(f"{src.stem}.none.pd_ee_pose.physx_cpu.h5")
     with h5py.File(dst, "r") as f:
         assert f["traj_0/success"][-1] and f["traj_0/actions"].shape[1] == 7
@@ -327,8 +327,8 @@ def test_replay_refuses_bad_input_naming_the_file_and_what_to_do(tmp_path):
     with pytest.raises(SystemExit, match="pd_ee_pose_euler: not a SoftVT control mode; choose one of"):
         replay_main(["--traj-path", str(good), "-c", "pd_ee_pose_euler"])
     # As a user runs it, where h5py used to end in its own traceback: the file named, what to do, no traceback.
-    err = _run("mani_skill_softvt.replay", "--traj-path", str(truncated), "-o", "state", ok=False).stderr
-    assert err.startswith(f"python -m mani_skill_softvt.replay: error: {truncated} is not a readable HDF5 file")
+    err = _run("mani_skill_softvt.integrations.maniskill.replay", "--traj-path", str(truncated), "-o", "state", ok=False).stderr
+    assert err.startswith(f"python -m mani_skill_softvt.integrations.maniskill.replay: error: {truncated} is not a readable HDF5 file")
     assert "delete it and re-run the command that wrote it" in err
 
 
@@ -374,7 +374,7 @@ def test_motionplanning_refuses_bad_input_before_it_plans(tmp_path, capsys):
         (["-e", "SoftVTObjectSoftish-v1"], "'SoftVTObjectSoftish-v1' is not a SoftVT env id"),
         (["-e", RIGID_TASK, "--task-id", "4"], f"-e {RIGID_TASK} is task 3, but --task-id 4"),
         (["-e", RIGID, "--task-id", "12"], "task_id must be an integer in [0, 9]"),
-        (["-e", RIGID_TASK, "--control-mode", "pd_ee_delta_pose"], "convert with `python -m mani_skill_softvt.replay"),
+        (["-e", RIGID_TASK, "--control-mode", "pd_ee_delta_pose"], "convert with `python -m mani_skill_softvt.integrations.maniskill.replay"),
         (["-e", f"mani_skill_softvt:{RIGID_TASK}", "--record-dir", str(tmp_path)], "task3.h5 exists"),
     ]
     for argv, why in cases:

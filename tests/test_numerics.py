@@ -1,4 +1,4 @@
-"""Same bits on any x86-64 machine: the numerics are pinned (mani_skill_softvt/numerics.py), and what
+"""Same bits on any x86-64 machine: the numerics are pinned (mani_skill_softvt/provenance/numerics.py), and what
 the benchmark computes under them matches the committed golden fingerprints.
 
 The goldens (tests/golden/fingerprints.json) were made under the pins on one machine kind and name
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from mani_skill_softvt import fingerprints as F
-from mani_skill_softvt import numerics as N
+from mani_skill_softvt.provenance import numerics as N
 from mani_skill_softvt.parallel import run_tasks
 from softvt_campaign import fingerprints as DP
 
@@ -174,7 +174,7 @@ def test_a_campaign_command_run_on_its_own_runs_under_the_pins():
     import sys
 
     code = ("import softvt_campaign.baselines.train\n"
-            "from mani_skill_softvt.numerics import resolved\n"
+            "from mani_skill_softvt.provenance.numerics import resolved\n"
             "r = resolved(); print(r['pinned'], r['loaded_before_pin'])")
     env = {k: v for k, v in os.environ.items() if not k.startswith(("SOFTVT_NUMERICS", "ATEN_", "OPENBLAS_", "NPY_",
                                                                       "MKL_", "ONEDNN_", "DNNL_", "OPENCV_", "LP_"))}

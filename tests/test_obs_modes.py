@@ -20,7 +20,7 @@ import trimesh
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.calibration import protocol as P
 from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
-from mani_skill_softvt.observations import NATIVE_CAMERA_SIZE, OBS_MODES, TEXTURES, CameraSize, ObsMode
+from mani_skill_softvt.contracts.observations import NATIVE_CAMERA_SIZE, OBS_MODES, TEXTURES, CameraSize, ObsMode
 from mani_skill_softvt.physics.transforms import yaw_between
 
 DEPTH_QUANTUM = 1e-3  # m: ManiSkill's depth and SAPIEN's position texture are int16 millimetres
@@ -158,6 +158,6 @@ def test_spatial_instances_have_two_stable_ids_named_as_the_rigid_twins():
 
 
 def _hold(u):
-    from mani_skill_softvt.actions import ee_action
+    from mani_skill_softvt.contracts.actions import ee_action
 
     return ee_action(u.agent.tcp.pose.p[0].cpu().numpy().astype(np.float64), 0.0)

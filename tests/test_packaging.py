@@ -178,3 +178,15 @@ def test_missing_cards_name_the_directory_the_variable_and_the_remedy(tmp_path, 
         message = str(err.value)
         assert str(tmp_path) in message and var in message and "reinstall the package" in message, message
         assert "build" not in message and "calibrate" not in message, message
+
+
+def test_an_old_command_path_runs_the_command_and_says_where_it_moved():
+    """``python -m mani_skill_softvt.compare`` (an old path, one release) runs ``cli.compare`` and
+    names the new path on stderr; the paths README keeps (``.evaluate``) print no such note."""
+    old = subprocess.run([sys.executable, "-m", "mani_skill_softvt.compare", "--help"], capture_output=True,
+                         text=True, timeout=300, cwd=REPO_DIR)
+    assert old.returncode == 0 and "--a A" in old.stdout
+    assert "moved to python -m mani_skill_softvt.cli.compare (or softvt-compare)" in old.stderr
+    kept = subprocess.run([sys.executable, "-m", "mani_skill_softvt.evaluate", "--help"], capture_output=True,
+                          text=True, timeout=300, cwd=REPO_DIR)
+    assert kept.returncode == 0 and "moved to" not in kept.stderr

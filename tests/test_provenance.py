@@ -1,4 +1,4 @@
-"""Provenance (mani_skill_softvt/provenance.py): one place for the version markers, the seal of a
+"""Provenance (mani_skill_softvt/provenance/): one place for the version markers, the seal of a
 record and the table of what an older file lacks; each row of the table names the code that acts
 on it, and that code exists."""
 
@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from mani_skill_softvt import actions, provenance
+from mani_skill_softvt import provenance
+from mani_skill_softvt.contracts import actions
 from mani_skill_softvt.fileio import file_sha256
 from mani_skill_softvt.data import trajectory
 from mani_skill_softvt.evaluation import records

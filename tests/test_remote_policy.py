@@ -237,9 +237,9 @@ def test_dropped_silent_and_malformed_servers_fail_within_bounds():
 
 @contextlib.contextmanager
 def _serve_cli(policy: str, timeout: float = 90):
-    """``python -m mani_skill_softvt.serve POLICY --port 0`` in a subprocess; its URL; always killed."""
+    """``python -m mani_skill_softvt.integrations.openpi.serve POLICY --port 0`` in a subprocess; its URL; always killed."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, "-m", "mani_skill_softvt.serve", policy, "--port", "0"], cwd=REPO,
+    proc = subprocess.Popen([sys.executable, "-m", "mani_skill_softvt.integrations.openpi.serve", policy, "--port", "0"], cwd=REPO,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()

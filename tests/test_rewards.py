@@ -10,9 +10,9 @@ import torch
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
 from mani_skill_softvt.calibration.cards import write_card
-from mani_skill_softvt.physics.constants import physics_signature
+from mani_skill_softvt.physics.config import physics_signature
 from mani_skill_softvt.tasks import rewards as R
-from mani_skill_softvt.actions import ee_action
+from mani_skill_softvt.contracts.actions import ee_action
 from mani_skill_softvt.tasks.suites import task_spec
 
 ENV_ID, SUITE, TASK = "SoftVTObjectRigid-v1", "object_rigid", 3

@@ -2,7 +2,7 @@
 
 import json
 
-from mani_skill_softvt import numerics as N
+from mani_skill_softvt.provenance import numerics as N
 from mani_skill_softvt.evaluation import sidecar as P
 from mani_skill_softvt.paths import REPO_DIR
 from softvt_campaign.studies.results import provenance_lines

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from mani_skill_softvt.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, cpu_model, software_stack, stack_differences, unrecorded
+from mani_skill_softvt.provenance.stack import ARITHMETIC_CPU_FLAGS, cpu_isa, cpu_model, software_stack, stack_differences, unrecorded
 
 
 def test_cpu_isa_names_the_features_that_choose_the_arithmetic():

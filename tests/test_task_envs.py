@@ -8,7 +8,7 @@ import torch
 from scipy.spatial import cKDTree
 
 import mani_skill_softvt  # noqa: F401  (registers the envs)
-from mani_skill_softvt.actions import ee_action
+from mani_skill_softvt.contracts.actions import ee_action
 from mani_skill_softvt.tasks import constants as C
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS, SUITES, list_tasks
 from mani_skill_softvt.tactile.constants import GEL_THICKNESS
@@ -294,7 +294,7 @@ def test_cameras_render_only_for_the_observations_a_policy_reads():
     steps whose images the policy declines render no camera, and the episode is the same bit for
     bit as with every camera rendered (rendering reads the scene, never changes it); the GelSights
     capture every step either way."""
-    from mani_skill_softvt.policy import Policy
+    from mani_skill_softvt.contracts.policy import Policy
     from mani_skill_softvt.rollout import Observer, rollout
 
     class Chunks(Policy):  # chunks of 3 "hold still"; asks for images after every other call

@@ -13,6 +13,6 @@ library a user installs. It uses the library and the library never imports it:
   library's (``scripts/fingerprint.py`` runs both).
 """
 
-# First: the library pins the numerics (mani_skill_softvt/numerics.py) before numpy or torch load, so a
+# First: the library pins the numerics (mani_skill_softvt/provenance/numerics.py) before numpy or torch load, so a
 # campaign command run on its own (softvt-train, python -m softvt_campaign...) computes the same bits.
 import mani_skill_softvt  # noqa: F401,E402

@@ -12,7 +12,7 @@ from ..version import __version__
 from ..fileio import atomic_write_json, read_json
 from ..paths import CALIBRATION_DIR, missing_data_hint
 from ..physics.config import DEFAULT_PHYSICS, PhysicsConfig
-from ..physics.constants import physics_signature, signature_mismatch
+from ..physics.config import physics_signature, signature_mismatch
 from . import protocol as P
 from .stats import gripper_envelope
 

@@ -15,3 +15,13 @@ aliases of these; the others' old paths are aliases for one release. The ManiSki
 openpi commands live with their integrations (``integrations/``), the campaign's with the campaign
 (``campaign/``).
 """
+
+import sys
+
+
+def moved_command(old: str, new: str, console: str | None = None) -> None:
+    """The note an old ``python -m`` path prints before it runs its command from the new place (one
+    release, then the old path goes)."""
+    also = f" (or {console})" if console else ""
+    print(f"note: python -m {old} moved to python -m {new}{also}; the old path goes with the next release",
+          file=sys.stderr)

@@ -27,7 +27,7 @@ from ..demonstrations.generate import generate
 from ..demonstrations.render import render
 from ..demonstrations.stats import format_stats, stats
 from ..integrations.lerobot.export import export_lerobot
-from ..observations import CameraSize, ObsMode, parse_image_size
+from ..contracts.observations import CameraSize, ObsMode, parse_image_size
 from ..paths import DEMOS_DIR, writable_default
 from ..tasks.suites import NUM_TASKS, SUITES
 
@@ -60,12 +60,12 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--control-mode", default="pd_ee_pose",
                    choices=("pd_ee_pose", "pd_ee_pose_binary", "pd_joint_pos", "pd_joint_pos_binary"),
                    help="recorded actions: the paper's pd_ee_pose (default) or ManiSkill's pd_joint_pos "
-                        "(python -m mani_skill_softvt.replay -c converts it into any other mode)")
+                        "(python -m mani_skill_softvt.integrations.maniskill.replay -c converts it into any other mode)")
     r = sub.add_parser("render", help="re-render stored demos into observations (e.g. rgb+tactile)")
     r.add_argument("--suite", default="object_soft", choices=sorted(SUITES))
     r.add_argument("--tasks", nargs="+", default=["all"])
     r.add_argument("--obs-mode", default="rgb+tactile",
-                   help="any camera mode of the env (mani_skill_softvt.observations), e.g. rgb+tactile, rgbd+tactile "
+                   help="any camera mode of the env (mani_skill_softvt.contracts.observations), e.g. rgb+tactile, rgbd+tactile "
                         "(camera depth, which export-lerobot carries as observation.depth.<camera>), pointcloud")
     r.add_argument("--camera-size", default="native", metavar="HxW",
                    help="render both cameras at HxW (e.g. 84x84, the cpu baselines' input) instead of 224x224")

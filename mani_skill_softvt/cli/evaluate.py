@@ -33,9 +33,9 @@ from ..evaluation.report import plot_ood_curves, plot_traces, write_report
 from ..evaluation.run import DEFAULT_TASKS, RunConfig
 from ..evaluation.runner import evaluate, recorded_obs_modes, relative_difference, reproduce, run_records
 from ..evaluation.videos import record_episode_video, video_name
-from ..observations import CameraSize
-from ..numerics import numerics_of, reproduction_note
-from ..stack import MACHINE_KEYS, software_stack, stack_differences, unrecorded
+from ..contracts.observations import CameraSize
+from ..provenance.numerics import numerics_of, reproduction_note
+from ..provenance.stack import MACHINE_KEYS, software_stack, stack_differences, unrecorded
 from ..tasks.suites import SUITES, task_spec
 from .arguments import existing_path
 
@@ -57,7 +57,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--episodes-per-task", type=int, default=None, help="default 1")
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
-                    help="any mode the env supports (mani_skill_softvt.observations: state, state_dict, rgb, depth, "
+                    help="any mode the env supports (mani_skill_softvt.contracts.observations: state, state_dict, rgb, depth, "
                          "segmentation, rgbd, pointcloud, sensor_data, '+' combinations, each camera mode with "
                          "+tactile); default: the policy's own (a trained baseline's, a policy class's obs_modes), "
                          "else the env's, state")
@@ -65,7 +65,7 @@ def main(argv=None) -> dict:
                     help="render the cameras at HxW (default: the size the policy asks for, a trained baseline's "
                          "own, else 224x224); a policy server trained on smaller images needs it")
     ap.add_argument("--control-mode", default=None,
-                    help="any mode the env offers (mani_skill_softvt.actions CONTROL_MODES): pd_ee_pose (default), "
+                    help="any mode the env offers (mani_skill_softvt.contracts.actions CONTROL_MODES): pd_ee_pose (default), "
                          "pd_ee_pose_binary (the binary-gripper baselines vo-b, vt-b; their default), ManiSkill's "
                          "pd_joint_pos, pd_joint_delta_pos, pd_ee_delta_pose (a ManiSkill diffusion-policy "
                          "checkpoint's default, evaluation/maniskill_dp.py) and their _binary twins")

@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from .. import tasks  # noqa: F401  (registers the envs)
-from ..actions import ee_action
+from ..contracts.actions import ee_action
 
 
 def main() -> None:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..fileio import file_lock, read_jsonl
-from ..observations import NATIVE_CAMERA_SIZE, camera_size_name, is_native_camera_size
+from ..contracts.observations import NATIVE_CAMERA_SIZE, camera_size_name, is_native_camera_size
 from ..tasks.suites import NUM_TASKS, get_suite
 
 

@@ -37,7 +37,7 @@ from mani_skill.utils.logging_utils import logger
 from mani_skill.utils.wrappers.record import RecordEpisode
 
 from ..rollout import EvaluatorTrace
-from ..actions import action_closure, gripper_action, normalized_gripper
+from ..contracts.actions import action_closure, gripper_action, normalized_gripper
 from ..tasks.suites import recorded_env_id
 
 # The evaluator trace's fields a recorded episode keeps beside "nodes" (float32), in this order.

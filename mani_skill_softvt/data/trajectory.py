@@ -25,9 +25,9 @@ import numpy as np
 import torch
 
 from ..fileio import atomic_write, atomic_write_json, read_json
-from ..observations import nest
+from ..contracts.observations import nest
 from ..provenance import RENDER_VERSION  # what a rendering holds; its history is there
-from ..actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND, gripper_action, normalized_gripper
+from ..contracts.actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS, UPGRADE_COMMAND, gripper_action, normalized_gripper
 from ..tasks.objects import TWIN_CONTACT_STATE
 from ..tasks.suites import parse_env_id, recorded_env_id
 

@@ -15,7 +15,7 @@ import numpy as np
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from tqdm import tqdm
 
-from ..actions import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
+from ..contracts.actions import GRIPPER_ACTION_VERSION, UPGRADE_COMMAND, normalized_gripper
 from ..data.demo_set import DemoSet
 from ..data.record import SoftVTRecordEpisode, episode_paths, quiet_maniskill_logger
 from ..data.seeds import ID_EPISODES_PER_TASK, id_seed, train_seed
@@ -24,9 +24,9 @@ from ..evaluation.wrapper import make_env
 from ..expert.pick_place import DEFAULT_PLANNER
 from ..expert.solution import SOURCE_DESC, solve
 from ..fileio import append_jsonl, atomic_write_json, read_json
-from ..numerics import chosen as chosen_numerics
+from ..provenance.numerics import chosen as chosen_numerics
 from ..parallel import run_tasks
-from ..physics.constants import physics_signature, signature_mismatch
+from ..physics.config import physics_signature, signature_mismatch
 
 
 def record_demo(env, seed: int, path: Path, planner: str) -> tuple[list[str], dict]:
@@ -190,7 +190,7 @@ def generate(suite: str, tasks: list[int], num: int, out: Path, workers: int = 1
         if recorded.get("control_mode", "pd_ee_pose") != control_mode:
             raise ValueError(f"{demo_set.manifest}: the demos there record {recorded.get('control_mode', 'pd_ee_pose')} "
                              f"actions, not {control_mode}; generate into another --out (or convert them with "
-                             f"python -m mani_skill_softvt.replay -c {control_mode})")
+                             f"python -m mani_skill_softvt.integrations.maniskill.replay -c {control_mode})")
 
         if normalized_gripper(control_mode) and recorded.get("gripper_action_version", 1) != GRIPPER_ACTION_VERSION:
             raise ValueError(f"{demo_set.manifest}: the {control_mode} demos there command the gripper by its closure "

@@ -21,7 +21,7 @@ from ..data.trajectory import (
     write_rendering,
 )
 from ..evaluation.wrapper import make_env
-from ..observations import camera_sensor_configs, camera_size_name, flatten_batch, is_native_camera_size, tactile_keys
+from ..contracts.observations import camera_sensor_configs, camera_size_name, flatten_batch, is_native_camera_size, tactile_keys
 from ..parallel import run_tasks
 from ..tasks.objects import TWIN_CONTACT_STATE
 from ..tasks.suites import get_suite

@@ -1,6 +1,6 @@
 """The policy door of the evaluation: every way a policy is named, resolved once, and the built-in policies.
 
-The contract (``reset``, ``act``, ``name``, ``privileged``) is :mod:`mani_skill_softvt.policy`.
+The contract (``reset``, ``act``, ``name``, ``privileged``) is :mod:`mani_skill_softvt.contracts.policy`.
 Only the built-in scripted experts are privileged: the runner binds them to the env they plan on
 and labels their records so; every other policy (in process, or served over ``ws://``) never
 holds the env.
@@ -30,10 +30,10 @@ import numpy as np
 from tqdm import tqdm
 
 from ..expert.policy import CartesianExpertPolicy, ScriptedExpertPolicy  # noqa: F401  (built in; re-exported)
-from ..observations import TCP_POSE, lookup
+from ..contracts.observations import TCP_POSE, lookup
 from ..provenance import moved_data_path
-from ..policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
-from ..actions import base_frame_pose
+from ..contracts.policy import Policy  # noqa: F401  (the contract; re-exported for user code that imported it here)
+from ..contracts.actions import base_frame_pose
 
 POLICY_KINDS_GROUP = "mani_skill_softvt.policy_kinds"
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..data.seeds import ID_EPISODES_PER_TASK
-from ..observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs, is_native_camera_size
-from ..actions import CONTROL_MODES
+from ..contracts.observations import DEFAULT_OBS_MODE, NATIVE_CAMERA_SIZE, ObsMode, camera_sensor_configs, is_native_camera_size
+from ..contracts.actions import CONTROL_MODES
 from ..tasks.suites import NUM_TASKS, SUITES
 from .policies import PolicySource, resolve_policy
 from .protocols import episodes

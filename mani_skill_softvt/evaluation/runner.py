@@ -38,13 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from ..fileio import append_jsonl, file_sha256
-from ..numerics import chosen as chosen_numerics
-from ..numerics import numerics_of, resolved
-from ..observations import CAMERAS, info_bool
+from ..provenance.numerics import chosen as chosen_numerics
+from ..provenance.numerics import numerics_of, resolved
+from ..contracts.observations import CAMERAS, info_bool
 from ..parallel import WorkerDiedError, run_tasks
 from ..provenance import moved_data_path, same_data_path, today_data_path
 from ..rollout import Observer, rollout
-from ..stack import software_stack
+from ..provenance.stack import software_stack
 from ..tasks.suites import get_suite
 from ..version import __version__
 from .protocols import episode_key, protocol_of, reset_options
@@ -185,7 +185,7 @@ def evaluate(run: RunConfig, out: Path, episodes: list[dict] | None = None, work
     count as done. The records file is read once; new records are appended as they come.
     ``ray_address`` runs the same (suite, task) batches as Ray tasks instead of ``workers``
     local processes ("local", "auto" or "ray://host:port"); the records are the same. ``numerics``:
-    the numerics the episodes run under (:mod:`mani_skill_softvt.numerics`; None: this process's).
+    the numerics the episodes run under (:mod:`mani_skill_softvt.provenance.numerics`; None: this process's).
     """
     out = Path(out)
     episodes = run.episodes() if episodes is None else episodes

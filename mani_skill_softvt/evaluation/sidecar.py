@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_json
-from ..numerics import machine_kind, numerics_of
+from ..provenance.numerics import machine_kind, numerics_of
 
 PROVENANCE_FILE = "provenance.json"
 

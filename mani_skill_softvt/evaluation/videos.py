@@ -19,7 +19,7 @@ import imageio
 import numpy as np
 
 from ..fileio import atomic_write
-from ..observations import CAMERAS, SIDES, camera_key, lookup, tactile_key
+from ..contracts.observations import CAMERAS, SIDES, camera_key, lookup, tactile_key
 from ..tasks import constants as C
 from ..tasks.suites import get_suite
 from .runner import run_episode

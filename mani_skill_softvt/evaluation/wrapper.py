@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 
 from .. import tasks  # noqa: F401  (registers the envs)
-from ..observations import camera_sensor_configs, info_bool
+from ..contracts.observations import camera_sensor_configs, info_bool
 from ..tasks.suites import get_suite
 from .metrics import deformation_ratio, dsr_success
 
@@ -79,7 +79,7 @@ def make_env(suite: str, task_id: int, *, dsr: bool = True, calibration_dir=None
     """The env of ``suite``'s task ``task_id`` (``kwargs`` go to ``gym.make``: obs_mode,
     control_mode, max_episode_steps, ...), DSR-wrapped unless ``dsr=False``; its calibration card
     is read from ``calibration_dir`` (default: the package's cards). ``camera_size`` = (height,
-    width) renders the two policy cameras at that size (:func:`~mani_skill_softvt.observations.camera_sensor_configs`)."""
+    width) renders the two policy cameras at that size (:func:`~mani_skill_softvt.contracts.observations.camera_sensor_configs`)."""
     if calibration_dir is not None:  # only then: recorded env kwargs stay free of machine paths
         kwargs["calibration_dir"] = str(calibration_dir)
     sized = camera_sensor_configs(camera_size)

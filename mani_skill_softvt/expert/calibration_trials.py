@@ -21,7 +21,7 @@ from ..calibration.stats import slip_distance
 from ..data.seeds import calibration_seed
 from ..fileio import append_jsonl, read_jsonl
 from ..paths import CALIBRATION_DIR
-from ..physics.constants import physics_signature, signature_mismatch
+from ..physics.config import physics_signature, signature_mismatch
 from ..physics.transforms import yaw_between
 from .grasp_script import GraspPlan, run_grasp_script
 

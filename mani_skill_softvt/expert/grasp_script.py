@@ -14,9 +14,9 @@ import numpy as np
 
 from ..physics.constants import MIN_TET_VOLUME_RATIO
 from ..physics.errors import SimulationInstabilityError
-from ..policy import Policy
+from ..contracts.policy import Policy
 from ..rollout import EvaluatorTrace, Observer, rollout
-from ..actions import ee_action
+from ..contracts.actions import ee_action
 from ..tasks.robot import mid_height_grasp
 
 @dataclass
@@ -97,7 +97,7 @@ def run_grasp_script(env, plan: GraspPlan | None = None, object_name: str | None
 
     ``on_step(phase, i, n)`` is called after every control step; returning ``"stop"`` ends the
     script early (e.g. a calibration trial whose object was not lifted). A collapsed tet raises
-    :class:`~mani_skill_softvt.physics.fem.SimulationInstabilityError`: a grasp the calibration
+    :class:`~mani_skill_softvt.physics.errors.SimulationInstabilityError`: a grasp the calibration
     measures must keep the mesh valid throughout (its peak D would not be trustworthy).
     """
     object_name = object_name or env.unwrapped.object_names[0]  # the scene's first object unless named

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..physics.transforms import down_quat_yaw, down_rotvec, quat_to_rotvec, rotvec_to_quat, yaw_between
 from ..tasks import constants as C
-from ..actions import ee_action, gripper_action, normalized_gripper
+from ..contracts.actions import ee_action, gripper_action, normalized_gripper
 from ..tasks.robot import mid_height_grasp
 from .planner import MotionPlanner, PlanningError, held_object, plan_expert_path
 
@@ -164,7 +164,7 @@ def mode_actions(env, plan: ExpertPlan):
     arm = mode.removesuffix("_binary")
     if arm not in ("pd_ee_pose", "pd_joint_pos"):
         raise ValueError(f"the scripted expert drives pd_ee_pose or pd_joint_pos (and their _binary modes), not "
-                         f"'{mode}': record in pd_joint_pos and convert with `python -m mani_skill_softvt.replay "
+                         f"'{mode}': record in pd_joint_pos and convert with `python -m mani_skill_softvt.integrations.maniskill.replay "
                          f"--traj-path FILE -c {mode}`")
     actions = expert_actions(env, plan) if arm == "pd_ee_pose" else joint_actions(env, plan)
     normalized = normalized_gripper(mode)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..policy import Policy
+from ..contracts.policy import Policy
 from .pick_place import DEFAULT_PLANNER, PLANNERS, draw_closure, mode_actions, plan_pick_place
 
 

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observations import info_bool
-from ..policy import Policy
+from ..contracts.observations import info_bool
+from ..contracts.policy import Policy
 from ..rollout import Observer, rollout
 from .pick_place import DEFAULT_PLANNER
 from .planner import PlanningError

@@ -5,7 +5,7 @@ Values were measured on this project's 2-core CPU machines unless noted (docs/ph
 
 import numpy as np
 
-from .config import DEFAULT_PHYSICS, EE_ORIENTATION_AXIS_ANGLE, physics_signature, signature_mismatch  # noqa: F401
+from .config import DEFAULT_PHYSICS
 
 # The settings that shape a soft grasp (lockstep rate, VBD schedule, contact, friction) are one
 # frozen config, physics/config.py: an env is built with one, and records its signature.

@@ -36,7 +36,7 @@ from .transforms import angular_velocity_xyzw, pose_wxyz_to_matrix, sapien_pose_
 
 os.environ.setdefault("WARP_CACHE_PATH", str(WARP_CACHE_DIR))
 
-from ..numerics import configure_warp  # noqa: E402
+from ..provenance.numerics import configure_warp  # noqa: E402
 
 wp = configure_warp()  # the kernels compile for the pinned target, not the host (numerics.py)
 # Warp logs every kernel-module load and its init banner at INFO: commands print only their own output.

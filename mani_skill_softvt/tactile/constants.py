@@ -88,7 +88,7 @@ FLOW_POOL = 4  # px of the grid the markers are computed on
 # outside it: the gel is bonded to the acrylic, so it drags only a margin around the patch.
 SHEAR_DECAY = 12.0  # px (~0.7 mm)
 
-# The tactile model's version and its history: mani_skill_softvt/provenance.py.
+# The tactile model's version and its history: mani_skill_softvt/provenance/.
 MODEL_VERSION = TACTILE_MODEL_VERSION
 SOFT_MODEL_VERSION = TACTILE_SOFT_MODEL_VERSION
 

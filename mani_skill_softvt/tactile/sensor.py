@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..observations import SIDES
+from ..contracts.observations import SIDES
 from . import constants as C
 from ..physics.transforms import planar_rigid_fit
 from .config import DEFAULT_TACTILE, TactileConfig

@@ -2,12 +2,12 @@
 
 import numpy as np
 
-from ..actions import GRIPPER_Q_CLOSED, GRIPPER_Q_OPEN, ROBOT_BASE_POSE  # noqa: F401  (the action contract's)
+from ..contracts.actions import GRIPPER_Q_CLOSED, GRIPPER_Q_OPEN, ROBOT_BASE_POSE  # noqa: F401  (the action contract's)
 from ..physics.constants import CONTROL_FREQ, SIM_FREQ  # noqa: F401  (re-exported for tasks)
 
 # Gripper: finger joint q is half the jaw gap. Open = 80 mm gap. The closed target is below
 # zero (ManiSkill's trick) so that a closing drive always presses; the force limit caps it (both
-# targets are the action contract's, mani_skill_softvt/actions.py, as is the robot base pose).
+# targets are the action contract's, mani_skill_softvt/contracts/actions.py, as is the robot base pose).
 # Soft drive: the force grows over most of the closure range (contact at g ~ 0.35 on a 45 mm
 # object, the limit reached at g ~ 0.85), so a continuous closure grades the squeeze.
 GRIPPER_STIFFNESS = 4e2  # N/m

@@ -11,7 +11,7 @@ import trimesh
 from mani_skill import PACKAGE_ASSET_DIR
 
 from ..physics.transforms import pose_wxyz_to_matrix
-from ..observations import SIDES
+from ..contracts.observations import SIDES
 from ..tactile.sensor import finger_pad_frame
 from . import constants as C
 

@@ -25,7 +25,8 @@ from ..assets.tetmesh import embed_points, join_meshes, surface_of_tets, vertex_
 from ..physics import constants as PC
 from ..physics.coupling import MirroredBody, SapienNewtonCoupling
 from ..physics.config import DEFAULT_PHYSICS, PhysicsConfig
-from ..physics.fem import SimulationInstabilityError, SoftBodyWorld
+from ..physics.errors import SimulationInstabilityError
+from ..physics.fem import SoftBodyWorld
 from ..physics.rigid import RigidObject, rigid_nodes
 from . import constants as C
 from . import fingers

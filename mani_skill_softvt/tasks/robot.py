@@ -12,7 +12,7 @@ Differences from ManiSkill's ``panda`` (same URDF and arm gains):
   motion planners drive; arm joint targets), ``pd_joint_delta_pos`` and ``pd_ee_delta_pose``
   (ManiSkill's normalised delta modes, what its learning baselines train on), all with ManiSkill
   Panda's arm gains and bounds;
-- the gripper, in two encodings per mode and two scales (:mod:`mani_skill_softvt.actions`, the action
+- the gripper, in two encodings per mode and two scales (:mod:`mani_skill_softvt.contracts.actions`, the action
   contract: the control modes, the gripper's encodings, the robot base frame).
 """
 
@@ -33,7 +33,7 @@ from mani_skill.agents.robots.panda.panda import Panda
 from mani_skill.utils.geometry.rotation_conversions import axis_angle_to_quaternion
 from mani_skill.utils.structs.pose import Pose
 
-from ..actions import ARM_MODES, closure_to_q, normalized_gripper
+from ..contracts.actions import ARM_MODES, closure_to_q, normalized_gripper
 from . import constants as C
 
 

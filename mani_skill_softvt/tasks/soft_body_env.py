@@ -43,7 +43,7 @@ from mani_skill.utils import sapien_utils
 from mani_skill.utils.common import to_numpy
 from mani_skill.utils.structs.types import SimConfig
 
-from ..observations import SIDES, ObsMode
+from ..contracts.observations import SIDES, ObsMode
 from ..physics.deformation import deformation
 from ..tactile.gelsight import GelSight, GelSightConfig
 from ..tactile.geometry import contact_polygons, polygons_mask
@@ -67,7 +67,7 @@ class SoftBodyEnv(BaseEnv):
 
     SUPPORTED_ROBOTS = ["panda_softvt"]
     # ManiSkill's: every camera texture and its combinations, point clouds and raw sensor data, each
-    # also with "+tactile" (mani_skill_softvt.observations.ObsMode); the first is the default.
+    # also with "+tactile" (mani_skill_softvt.contracts.observations.ObsMode); the first is the default.
     SUPPORTED_OBS_MODES = ("state", "state_dict", "none", "sensor_data", "any_textures", "pointcloud")
     agent: PandaSoftVT
 

@@ -33,7 +33,7 @@ their depth, points and masks follow the squeeze. ``agent`` holds joint position
 ``extra`` the TCP pose and the jaw width. Observations are arrays only: the instruction is the
 env's (:attr:`SoftVTTaskEnv.instruction`). Nothing evaluator-only (FEM nodes, object poses,
 deformation, materials) is in any mode; the evaluator reads the env's evaluator-only accessors
-(:meth:`SoftBodyEnv.evaluator_state`). The contract: :mod:`mani_skill_softvt.observations`.
+(:meth:`SoftBodyEnv.evaluator_state`). The contract: :mod:`mani_skill_softvt.contracts.observations`.
 
 **Action** (``control_mode``): ``pd_ee_pose`` (the default; 7-D: absolute TCP position in the robot
 base frame, axis-angle orientation, gripper closure in [0, 1]), ManiSkill's ``pd_ee_delta_pose`` (7-D),
@@ -76,7 +76,7 @@ from ..calibration.cards import load_calibration_card
 from ..paths import CALIBRATION_DIR
 from . import constants as C
 from . import rewards
-from ..actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
+from ..contracts.actions import GRIPPER_ACTION_VERSION, GRIPPER_ACTION_VERSIONS
 from .soft_body_env import ObjectSpec, PropCollider, SoftBodyEnv
 from .suites import NUM_TASKS, SUITES, TaskSpec, swapped_side, task_spec
 

@@ -20,8 +20,8 @@ import numpy as np
 import torch
 
 from mani_skill_softvt.evaluation.policies import PolicyKind, PolicySource
-from mani_skill_softvt.observations import flatten_batch, is_native_camera_size
-from mani_skill_softvt.policy import Policy
+from mani_skill_softvt.contracts.observations import flatten_batch, is_native_camera_size
+from mani_skill_softvt.contracts.policy import Policy
 from mani_skill_softvt.tasks.suites import get_suite
 from .config import DPConfig
 from .features import frame_features

@@ -51,7 +51,7 @@ from tqdm import tqdm
 from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.data.trajectory import holds_twin_contact, open_h5, tactile_model_of
 from mani_skill_softvt.fileio import atomic_write_json, read_json
-from mani_skill_softvt.observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
+from mani_skill_softvt.contracts.observations import CAMERAS, NATIVE_CAMERA_SIZE, QPOS, TCP_POSE, camera_key, tactile_keys
 from mani_skill_softvt.tasks.suites import get_suite
 from .config import DPConfig
 from .features import FEATURES_VERSION, frame_features

@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from mani_skill_softvt.data.images import resize_image
-from mani_skill_softvt.observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
+from mani_skill_softvt.contracts.observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, tactile_key
 from mani_skill_softvt.physics.transforms import down_rotvec
-from mani_skill_softvt.actions import base_frame_pose
+from mani_skill_softvt.contracts.actions import base_frame_pose
 from .config import DPConfig
 
 # Bumped whenever frame_features computes anything differently: prepared training data is keyed by it.
@@ -57,8 +57,8 @@ def marker_displacement(marker_initial: np.ndarray, marker_current: np.ndarray) 
 
 def frame_features(flat: dict, cfg: DPConfig) -> dict[str, np.ndarray]:
     """The policy inputs of one step from a flat observation (the flat keys of
-    :mod:`mani_skill_softvt.observations`, one frame each: a rendered file's frame, or
-    :func:`~mani_skill_softvt.observations.flatten_batch` of a live observation)."""
+    :mod:`mani_skill_softvt.contracts.observations`, one frame each: a rendered file's frame, or
+    :func:`~mani_skill_softvt.contracts.observations.flatten_batch` of a live observation)."""
     # The jaw gap from the finger joints, as the env computes it: every observation path (env,
     # rendered file, policy server) carries qpos.
     width = float(np.asarray(flat[QPOS], np.float64).reshape(-1)[-2:].sum())

@@ -35,8 +35,8 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from mani_skill_softvt.fileio import atomic_write
-from mani_skill_softvt.numerics import chosen as chosen_numerics
-from mani_skill_softvt.numerics import release, resolved
+from mani_skill_softvt.provenance.numerics import chosen as chosen_numerics
+from mani_skill_softvt.provenance.numerics import release, resolved
 from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
 from mani_skill_softvt.tasks.suites import get_suite
 from .config import (

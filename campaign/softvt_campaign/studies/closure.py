@@ -53,7 +53,7 @@ from mani_skill_softvt.fileio import atomic_write, atomic_write_json
 from mani_skill_softvt.parallel import run_tasks
 from mani_skill_softvt.physics.constants import CONTROL_FREQ
 from mani_skill_softvt.rollout import EvaluatorTrace, Observer
-from mani_skill_softvt.stack import software_stack, stack_differences
+from mani_skill_softvt.provenance.stack import software_stack, stack_differences
 from mani_skill_softvt.tasks.suites import NUM_TASKS, SUITES
 
 

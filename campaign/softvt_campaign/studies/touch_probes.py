@@ -35,7 +35,7 @@ from mani_skill_softvt.data.demo_set import DemoSet
 from mani_skill_softvt.data.images import resize_image
 from mani_skill_softvt.data.trajectory import episode_digest, open_h5, rendering_current
 from mani_skill_softvt.fileio import atomic_write, atomic_write_json
-from mani_skill_softvt.observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
+from mani_skill_softvt.contracts.observations import CAMERAS, MARKER_FIELDS, SIDES, TCP_POSE, camera_key, parse_image_size, tactile_key
 from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
 from mani_skill_softvt.tasks.suites import NUM_TASKS, get_suite
 

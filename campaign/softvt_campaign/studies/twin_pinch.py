@@ -43,9 +43,9 @@ from mani_skill_softvt.calibration import protocol as P
 from mani_skill_softvt.calibration.stats import slip_distance
 from mani_skill_softvt.expert.grasp_script import GraspPlan, run_grasp_script
 from mani_skill_softvt.fileio import atomic_write, atomic_write_json, read_json
-from mani_skill_softvt.observations import SIDES
+from mani_skill_softvt.contracts.observations import SIDES
 from mani_skill_softvt.paths import REPO_DIR
-from mani_skill_softvt.physics.constants import physics_signature, signature_mismatch
+from mani_skill_softvt.physics.config import physics_signature, signature_mismatch
 from mani_skill_softvt.physics.rigid import rigid_nodes
 from mani_skill_softvt.physics.transforms import pose_wxyz_to_matrix, quat_wxyz_to_matrix, yaw_between
 from mani_skill_softvt.tactile import constants as TC

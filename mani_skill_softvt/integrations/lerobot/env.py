@@ -37,7 +37,7 @@ import numpy as np
 from .export import FPS, frame_feature_shapes, frame_features
 from ...data.seeds import ID_EPISODES_PER_TASK
 from ...fileio import append_jsonl
-from ...observations import flatten_batch, info_bool, unbatch
+from ...contracts.observations import flatten_batch, info_bool, unbatch
 from ...physics.errors import SimulationInstabilityError
 from ...rollout import episode_end
 from ...tasks.constants import MAX_EPISODE_STEPS

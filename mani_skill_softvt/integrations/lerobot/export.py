@@ -30,7 +30,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ...fileio import atomic_write, atomic_write_json
-from ...observations import (
+from ...contracts.observations import (
     CAMERAS,
     GRIPPER_WIDTH,
     MARKER_FIELDS,
@@ -106,7 +106,7 @@ def depth_metres(depth_mm: np.ndarray, image_size: tuple[int, int] | None = None
 
 
 def frame_features(flat: dict[str, np.ndarray], image_size: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
-    """One live observation (flattened, :func:`~mani_skill_softvt.observations.flatten_batch`) under
+    """One live observation (flattened, :func:`~mani_skill_softvt.contracts.observations.flatten_batch`) under
     the export's feature names: ``observation.state``, ``observation.images.<camera>`` and
     ``observation.images.tactile_<side>``, ``observation.tactile.<side>.<marker field>``; only those
     the observation has. ``image_size`` resizes every image as the export's ``--image-size`` does

@@ -38,7 +38,7 @@ import torch
 from gymnasium import spaces
 from mani_skill.utils.common import flatten_state_dict, to_numpy
 
-from ...policy import Policy
+from ...contracts.policy import Policy
 
 SCRIPTS = {"rgb": "train_rgbd.py", "state": "train.py"}  # obs mode -> ManiSkill's script that trains in it
 

@@ -4,8 +4,8 @@ A drop-in for ``python -m mani_skill.examples.motionplanning.panda.run`` (which 
 ManiSkill's own tasks): the same flags, the same output, the scripted expert as the solution
 (:func:`mani_skill_softvt.expert.solution.solve`)::
 
-    python -m mani_skill_softvt.motionplanning -e SoftVTObjectSoft-Task3-v1 -n 10 --only-count-success
-    python -m mani_skill_softvt.motionplanning -e SoftVTObjectRigid-v1 --task-id 3 -n 2 --save-video
+    python -m mani_skill_softvt.integrations.maniskill.motionplanning -e SoftVTObjectSoft-Task3-v1 -n 10 --only-count-success
+    python -m mani_skill_softvt.integrations.maniskill.motionplanning -e SoftVTObjectRigid-v1 --task-id 3 -n 2 --save-video
 
 ``-e`` takes a task's own env id (``SoftVTObjectSoft-Task3-v1``) or a suite's with ``--task-id``.
 Writes ``<record-dir>/<task env id>/motionplanning/<traj-name>.h5`` + ``.json`` (e.g.
@@ -13,7 +13,7 @@ Writes ``<record-dir>/<task env id>/motionplanning/<traj-name>.h5`` + ``.json`` 
 (``source_type="motionplanning"``, actions in ``pd_joint_pos`` unless ``--control-mode`` says
 otherwise, its gripper ManiSkill's normalised action), plus the evaluator stream and episode
 metadata (:mod:`mani_skill_softvt.data.record`); the json names the env
-``mani_skill_softvt:<task env id>``. Replay or convert it with ``python -m mani_skill_softvt.replay``.
+``mani_skill_softvt:<task env id>``. Replay or convert it with ``python -m mani_skill_softvt.integrations.maniskill.replay``.
 Seeds are the task's training seeds (:func:`mani_skill_softvt.data.seeds.train_seed`), disjoint
 from the evaluation seeds. The benchmark's own ``python -m mani_skill_softvt.demos generate`` runs
 the same solution with the same recorder, one resumable file per episode.
@@ -35,11 +35,11 @@ from ...data.record import SoftVTRecordEpisode, quiet_maniskill_logger
 from ...data.seeds import train_seed
 from ...evaluation.wrapper import DSRWrapper
 from ...expert.solution import SOURCE_DESC, solve
-from ...observations import info_bool
+from ...contracts.observations import info_bool
 from ...parallel import run_tasks
 from ...tasks import constants as C
-from ...observations import ObsMode
-from ...actions import CONTROL_MODES
+from ...contracts.observations import ObsMode
+from ...contracts.actions import CONTROL_MODES
 from ...tasks.suites import SUITES, parse_env_id, task_spec
 
 
@@ -55,7 +55,7 @@ def parse_args(argv=None, ap: argparse.ArgumentParser | None = None):
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.motionplanning", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.integrations.maniskill.motionplanning", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-e", "--env-id", default="SoftVTObjectSoft-v1",
                     help="a task's env id (SoftVTObjectSoft-Task3-v1), or a suite's (SoftVTObjectSoft-v1) with "
@@ -98,10 +98,10 @@ def check_args(args) -> None:
     modes = [m for m in CONTROL_MODES if m.removesuffix("_binary") in ("pd_joint_pos", "pd_ee_pose")]
     if args.control_mode not in modes:
         raise ValueError(f"--control-mode {args.control_mode}: the expert records one of {modes}; record in "
-                         f"pd_joint_pos and convert with `python -m mani_skill_softvt.replay --traj-path FILE.h5 -c "
+                         f"pd_joint_pos and convert with `python -m mani_skill_softvt.integrations.maniskill.replay --traj-path FILE.h5 -c "
                          f"{args.control_mode}`")
     try:
-        ObsMode.parse(args.obs_mode)  # the env's modes (mani_skill_softvt.observations)
+        ObsMode.parse(args.obs_mode)  # the env's modes (mani_skill_softvt.contracts.observations)
     except ValueError as e:
         raise ValueError(f"-o: {e}") from None
 

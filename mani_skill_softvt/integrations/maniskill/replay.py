@@ -1,13 +1,13 @@
-"""ManiSkill's ``replay_trajectory`` on SoftVT trajectories: ``python -m mani_skill_softvt.replay``.
+"""ManiSkill's ``replay_trajectory`` on SoftVT trajectories: ``python -m mani_skill_softvt.integrations.maniskill.replay``.
 
 Every flag is ManiSkill's own, handed over unchanged (``--traj-path``, ``-o``, ``-c``,
 ``--use-env-states``, ``--use-first-env-state``, ``--save-traj``, ``--save-video``, ``-n`` ...;
 ``--help`` lists them)::
 
-    python -m mani_skill_softvt.replay --traj-path demo-data/sample/object_soft/task3.h5 \\
+    python -m mani_skill_softvt.integrations.maniskill.replay --traj-path demo-data/sample/object_soft/task3.h5 \\
         --use-env-states -o rgb+tactile --save-traj
-    python -m mani_skill_softvt.replay --traj-path FILE.h5 --use-env-states -o pointcloud+tactile --save-traj
-    python -m mani_skill_softvt.replay --traj-path FILE.h5 -c pd_ee_delta_pose -o rgb --save-traj
+    python -m mani_skill_softvt.integrations.maniskill.replay --traj-path FILE.h5 --use-env-states -o pointcloud+tactile --save-traj
+    python -m mani_skill_softvt.integrations.maniskill.replay --traj-path FILE.h5 -c pd_ee_delta_pose -o rgb --save-traj
 
 Output goes beside the input as ``<name>.<obs_mode>.<control_mode>.physx_cpu.h5`` + ``.json``
 (ManiSkill's naming), its json naming the task's own env id, module-qualified
@@ -31,7 +31,7 @@ action is ManiSkill's normalised one, as ``pd_joint_pos``'s (:mod:`mani_skill_so
 Bad input is refused before anything runs, naming the file and what to do: a missing or
 truncated h5, a missing json, an env id that is not SoftVT's, a joint- or delta-mode file whose
 gripper actions are closures in [0, 1] (written before version 2 of the gripper encoding:
-``python -m mani_skill_softvt.replay --upgrade-gripper FILE.h5`` converts it in place).
+``python -m mani_skill_softvt.integrations.maniskill.replay --upgrade-gripper FILE.h5`` converts it in place).
 """
 
 from __future__ import annotations
@@ -53,12 +53,12 @@ from ...data.trajectory import (
     upgrade_gripper_actions,
 )
 from ...fileio import atomic_write_json, read_json
-from ...observations import ObsMode
+from ...contracts.observations import ObsMode
 from ...physics.transforms import quat_to_rotvec
-from ...actions import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
+from ...contracts.actions import CONTROL_MODES, UPGRADE_COMMAND, action_closure, gripper_action, normalized_gripper
 from ...tasks.suites import parse_env_id, recorded_env_id
 
-PROG = "python -m mani_skill_softvt.replay"
+PROG = "python -m mani_skill_softvt.integrations.maniskill.replay"
 
 
 class _BinaryGripperEnv:
@@ -174,7 +174,7 @@ def check_input(traj_path: str, target_control_mode: str | None) -> dict:
                           and not target_control_mode.endswith("_binary"))
         if source != "pd_joint_pos" and not maniskill_only:
             _refuse(f"{traj_path} holds {source} actions; -c converts from pd_joint_pos (what "
-                    f"`python -m mani_skill_softvt.motionplanning` records by default): record in pd_joint_pos, then "
+                    f"`python -m mani_skill_softvt.integrations.maniskill.motionplanning` records by default): record in pd_joint_pos, then "
                     f"convert with -c {target_control_mode}")
     return meta
 

@@ -1,8 +1,8 @@
 """Out-of-process policies over openpi's websocket protocol (``ws://HOST:PORT``).
 
-A policy server (an openpi ``serve_policy.py``, or :mod:`mani_skill_softvt.serve` for a project
+A policy server (an openpi ``serve_policy.py``, or :mod:`mani_skill_softvt.integrations.openpi.serve` for a project
 policy) runs in its own process, possibly on another machine with a GPU; the evaluator talks to
-it with :class:`WebsocketPolicy`, a :class:`~mani_skill_softvt.policy.Policy` like
+it with :class:`WebsocketPolicy`, a :class:`~mani_skill_softvt.contracts.policy.Policy` like
 any other. The wire format is openpi's: msgpack with numpy arrays (``openpi_client.msgpack_numpy``),
 the server sends a metadata dict on connect, each request is one observation dict and each reply
 is ``{"actions": (k, 7)}`` in the env's action space (``pd_ee_pose``: TCP position in the robot
@@ -27,7 +27,7 @@ Observation schema (LIBERO-style keys, so an openpi LIBERO policy reads it uncha
 
 ``state[:6]`` plus a gripper value is an action that holds the arm still. ``observation/qpos``
 and ``observation/tcp_pose_world`` are lossless copies of what the env gives, so a project policy served by
-:mod:`mani_skill_softvt.serve` computes bit for bit the actions it computes in process (the
+:mod:`mani_skill_softvt.integrations.openpi.serve` computes bit for bit the actions it computes in process (the
 base-frame position in ``state`` is rounded to float32 after the shift and cannot be shifted
 back exactly). Nothing evaluator-only (FEM nodes, object poses, deformation, materials) is sent.
 
@@ -48,9 +48,9 @@ from openpi_client import msgpack_numpy
 from openpi_client.websocket_client_policy import WebsocketClientPolicy
 from websockets.exceptions import ConnectionClosed
 
-from ...observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, lookup, tactile_key
-from ...policy import Policy
-from ...actions import base_frame_pose
+from ...contracts.observations import CAMERAS as ENV_CAMERAS, MARKER_FIELDS, QPOS, SIDES, TCP_POSE, camera_key, lookup, tactile_key
+from ...contracts.policy import Policy
+from ...contracts.actions import base_frame_pose
 
 ACTION_DIM = 7
 DEFAULT_CONNECT_TIMEOUT = 10.0  # s: TCP + websocket handshake + the server's metadata message
@@ -186,7 +186,7 @@ class WebsocketPolicy(Policy):
                                     f"metadata within {self.connect_timeout} s") from e
         except Exception as e:  # refused, unknown host, bad handshake: all "not there"
             raise RemotePolicyError(f"cannot connect to the policy server at {self.url}: {type(e).__name__}: {e}. "
-                                    "Is it running (python -m mani_skill_softvt.serve POLICY --port PORT)?") from e
+                                    "Is it running (python -m mani_skill_softvt.integrations.openpi.serve POLICY --port PORT)?") from e
         self.metadata = self._client.get_server_metadata()
         served = self.metadata.get("policy") if isinstance(self.metadata, dict) else None
         self.name = f"remote[{served or '?'}]@{self.url}"

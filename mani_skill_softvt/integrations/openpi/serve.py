@@ -1,7 +1,7 @@
 """Serve a project policy over openpi's websocket protocol, for ``--policy ws://HOST:PORT``.
 
-    python -m mani_skill_softvt.serve random --port 8000                  # a built-in policy
-    python -m mani_skill_softvt.serve mypkg.policies:MyPolicy --port 8000 --host 0.0.0.0
+    python -m mani_skill_softvt.integrations.openpi.serve random --port 8000                  # a built-in policy
+    python -m mani_skill_softvt.integrations.openpi.serve mypkg.policies:MyPolicy --port 8000 --host 0.0.0.0
 
 The counterpart of :class:`mani_skill_softvt.integrations.openpi.remote.WebsocketPolicy` (the protocol
 and the observation schema are documented there): the policy runs in this process, e.g. on a GPU
@@ -39,8 +39,8 @@ from .remote import (
     depth_wire_key,
     tactile_wire_key,
 )
-from ...observations import QPOS, SIDES, TCP_POSE, camera_key, nest, tactile_key
-from ...policy import is_privileged
+from ...contracts.observations import QPOS, SIDES, TCP_POSE, camera_key, nest, tactile_key
+from ...contracts.policy import is_privileged
 
 DEFAULT_PORT = 8000  # openpi's default
 
@@ -110,7 +110,7 @@ def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int =
     from openpi_client import msgpack_numpy
     from websockets.exceptions import ConnectionClosed
 
-    metadata = {"policy": name, "server": "mani_skill_softvt.serve", "package_version": __version__,
+    metadata = {"policy": name, "server": "mani_skill_softvt.integrations.openpi.serve", "package_version": __version__,
                 "action_space": "pd_ee_pose: (k, 7) TCP xyz in the robot base frame, axis-angle, gripper closure",
                 "episode_keys": [EPISODE_RESET, EPISODE_SEED]}
     if camera_size is not None:  # the evaluator must render its cameras at this size (evaluate --camera-size)
@@ -140,7 +140,7 @@ def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int =
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.serve", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m mani_skill_softvt.integrations.openpi.serve", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("policy", help=f"a built-in policy ({', '.join(_servable())}) "
                                    "or module:Class (constructed without arguments)")

@@ -35,7 +35,7 @@ from mani_skill_softvt.integrations.lerobot.export import FPS, frame_feature_sha
 from mani_skill_softvt.data.seeds import ID_EPISODES_PER_TASK
 from mani_skill_softvt.integrations.lerobot.env import LeRobotEnv, records_path, suite_of_env_id
 from mani_skill_softvt.evaluation.records import read_records
-from mani_skill_softvt.observations import parse_image_size
+from mani_skill_softvt.contracts.observations import parse_image_size
 from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS
 
 __all__ = ["SoftVTEnvConfig"]

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Findings campaign, step 1 (docs/baselines.md, "The findings campaign"): the committed VO-C and
 # VT-C on the Object-Soft OOD protocol, then their ID twins on this machine, then the report.
-#   bash scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
+#   bash campaign/scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
 # Every stage resumes where it stopped (records are appended as episodes finish): run the same
 # command again in the next session, from a checkout that holds the records so far.
 # 1. OOD: 9 held-out conditions x 10 tasks x 10 episodes a policy, into campaign-data/results/;
@@ -9,7 +9,7 @@
 #    campaign-data/results/twins/ (paired with the OOD episodes by the report);
 # 3. the report: campaign-data/results/ood.md, ood.json, ood_curves.png.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # One baseline variant trained and scored on a suite's ID protocol (docs/baselines.md: the baselines
 # campaign's steps 3, 4 and 6; the findings campaign's steps 2 to 4).
-#   bash scripts/campaign_protocol.sh [VARIANT=vo-c] [RECIPE=base] [WORKERS=1] [BUDGET_MIN=150] [NAME]
-#   SET="tactile_inputs=rgb" bash scripts/campaign_protocol.sh vt-c long 1 150 vt-c-rgb-cpu
-#   SUITE=object_rigid SET="steps=24000" bash scripts/campaign_protocol.sh vo-c noaug 1 150 vo-c-cpu
-#   SET="steps=24000 seed=1" bash scripts/campaign_protocol.sh vo-c noaug 1 150 vo-c-cpu-seed1
+#   bash campaign/scripts/campaign_protocol.sh [VARIANT=vo-c] [RECIPE=base] [WORKERS=1] [BUDGET_MIN=150] [NAME]
+#   SET="tactile_inputs=rgb" bash campaign/scripts/campaign_protocol.sh vt-c long 1 150 vt-c-rgb-cpu
+#   SUITE=object_rigid SET="steps=24000" bash campaign/scripts/campaign_protocol.sh vo-c noaug 1 150 vo-c-cpu
+#   SET="steps=24000 seed=1" bash campaign/scripts/campaign_protocol.sh vo-c noaug 1 150 vo-c-cpu-seed1
 # 1. trains the recipe (SET: more overrides) on every accepted demo of SUITE (default object_soft;
 #    SOFTVT_DEMOS_DIR, rendered at 84x84) into $SOFTVT_RUNS_DIR/final/[SUITE/]NAME, until BUDGET_MIN
 #    minutes are spent (run again to continue; nothing below runs before training ends);
@@ -17,7 +17,7 @@
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
 # Object-Soft runs keep the unprefixed paths they were made with.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # One training of the seed-level and Spatial campaigns (docs/baselines.md, "The seed-level and Spatial
 # campaigns"), planned for a session whose machine keeps nothing from the last one:
-#   bash scripts/campaign_session.sh SUITE VARIANT NAME [SEED=0] [PER_TASK=50]
-#   bash scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25    # an extra seed, the pre-registered 250
-#   bash scripts/campaign_session.sh spatial_rigid vo-c vo-c-cpu 0 50         # a Spatial policy's seed 0, all 500
+#   bash campaign/scripts/campaign_session.sh SUITE VARIANT NAME [SEED=0] [PER_TASK=50]
+#   bash campaign/scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25    # an extra seed, the pre-registered 250
+#   bash campaign/scripts/campaign_session.sh spatial_rigid vo-c vo-c-cpu 0 50         # a Spatial policy's seed 0, all 500
 # 1. SUITE's demo set, as its committed QC logs list it, recorded again (the same episodes, bit for
 #    bit, under the pinned numerics), merged and rendered at 84 px, on both cores: about 16 + 60 min
 #    for a rigid suite on a new machine, nothing where the store already holds it;
@@ -15,9 +15,9 @@
 # demos alone take about two hours of both cores, so its trainings wait for a machine that keeps the
 # stores between sessions. Run it from a worktree at a fixed commit, e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
-#     scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25 > /work/lane-session.log 2>&1 &
+#     campaign/scripts/campaign_session.sh object_rigid vo-c vo-c-cpu-seed1 1 25 > /work/lane-session.log 2>&1 &
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
@@ -27,8 +27,8 @@ export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 export PY=${PY:-.venv/bin/python}
 printf '\n[campaign session] %s  %s demos: recorded again, merged, rendered (two workers)\n' "$(date -u +%H:%M:%S)" "$SUITE"
-SCREEN_ONLY=0 HELP_FROM_LAST= RENDER_SIZE=84x84 SUITE=$SUITE bash scripts/campaign_demos.sh 100 2
+SCREEN_ONLY=0 HELP_FROM_LAST= RENDER_SIZE=84x84 SUITE=$SUITE bash campaign/scripts/campaign_demos.sh 100 2
 printf '\n[campaign session] %s  %s %s seed %s: train, export, %s ID episodes a task\n' "$(date -u +%H:%M:%S)" \
   "$SUITE" "$VARIANT" "$SEED" "$PER_TASK"
-SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED" bash scripts/campaign_protocol.sh "$VARIANT" noaug 1 100000 "$NAME"
+SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED" bash campaign/scripts/campaign_protocol.sh "$VARIANT" noaug 1 100000 "$NAME"
 printf '\n[campaign session] %s  done\n' "$(date -u +%H:%M:%S)"

@@ -9,12 +9,12 @@
 # SCREEN_ONLY=1 (passed on to campaign_demos.sh): grow the QC logs only, without recording again the
 # accepted episodes a new machine lacks, nor merging or rendering; the training machine runs it once
 # more without.
-# Recorded under the pinned numerics (mani_skill_softvt/numerics.py): the episodes replay anywhere.
+# Recorded under the pinned numerics (mani_skill_softvt/provenance/numerics.py): the episodes replay anywhere.
 # Run it from a git worktree at a fixed commit (no code change under a running job), e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
-#     scripts/campaign_spatial.sh > /work/lane-spatial.log 2>&1 &
+#     campaign/scripts/campaign_spatial.sh > /work/lane-spatial.log 2>&1 &
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
@@ -25,6 +25,6 @@ exec 9>"$SOFTVT_DEMOS_DIR/.lane-spatial.lock"
 flock -n 9 || { echo "the spatial lane is already running (lock $SOFTVT_DEMOS_DIR/.lane-spatial.lock)" >&2; exit 1; }
 for suite in spatial_rigid spatial_soft; do
   printf '\n[campaign spatial] %s  demos of %s\n' "$(date -u +%H:%M:%S)" "$suite"
-  SUITE=$suite bash scripts/campaign_demos.sh 100 1 10 250
+  SUITE=$suite bash campaign/scripts/campaign_demos.sh 100 1 10 250
 done
 printf '\n[campaign spatial] %s  demos done\n' "$(date -u +%H:%M:%S)"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Baselines campaign, step 2 (docs/baselines.md): the recipe search, resumable across sessions.
-#   bash scripts/campaign_recipes.sh [VARIANT=vo-c] [BUDGET_MIN=150] [RECIPE ...]
+#   bash campaign/scripts/campaign_recipes.sh [VARIANT=vo-c] [BUDGET_MIN=150] [RECIPE ...]
 # Trains the named recipes (campaign/softvt_campaign/baselines/config.py: RECIPES, run by studies/recipe_search.py; default: all, in
 # order) on the step-1 demos (SOFTVT_DEMOS_DIR, default /root/softvt-demos, rendered at 84x84),
 # each with 90 demos a task trained on and the next 10 held out, until BUDGET_MIN minutes are
@@ -9,7 +9,7 @@
 # campaign-data/search/<variant>.jsonl, which is committed. SET="key=value ..." adds overrides to
 # every recipe (runs named <variant>-<recipe>+key=value).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"

@@ -2,11 +2,11 @@
 # The findings campaign's remaining runs (docs/baselines.md "What runs next"), as two lanes of one
 # core each, both resumable: run the same command again, in any later session, and each step
 # skips what it finds done (the demos' QC logs, a training's checkpoint, an evaluation's records).
-#   bash scripts/campaign_findings.sh rigid   # VT-C on Object-Rigid, its closure study; then vt-c seed 1, vt-b
-#   bash scripts/campaign_findings.sh soft    # the Object-Soft demos; then vo-c seed 1, vo-b
+#   bash campaign/scripts/campaign_findings.sh rigid   # VT-C on Object-Rigid, its closure study; then vt-c seed 1, vt-b
+#   bash campaign/scripts/campaign_findings.sh soft    # the Object-Soft demos; then vo-c seed 1, vo-b
 # Run it from a git worktree at a fixed commit (no code change under a running evaluation), e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
-#     scripts/campaign_findings.sh rigid > /work/lane-rigid.log 2>&1 &
+#     campaign/scripts/campaign_findings.sh rigid > /work/lane-rigid.log 2>&1 &
 # Its products (policies, records, reports, QC logs) land in that worktree's campaign-data/ and demo-data/,
 # to be copied into main and committed as each finishes. Stores stay outside the checkout
 # (SOFTVT_DEMOS_DIR, SOFTVT_RUNS_DIR): on a machine without them the demos are recorded again from
@@ -22,7 +22,7 @@
 # writes into its own directory (campaign-data/results/closure_rigid_vo-c_vt-c/), beside the VO-C-only
 # study that docs/findings.md cites, and runs two workers (one per policy) for its few minutes.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
@@ -45,24 +45,24 @@ flock -n 9 || { echo "the $LANE lane is already running (lock $SOFTVT_RUNS_DIR/.
 RIGID_DEMOS_LOCK=$SOFTVT_RUNS_DIR/.object_rigid-demos.lock
 rigid_demos() {  # 1,000 Object-Rigid demos rendered at 84 px, on both cores while the soft lane waits
   step "Object-Rigid demos (both cores: the soft lane waits)"
-  SUITE=object_rigid flock "$RIGID_DEMOS_LOCK" bash scripts/campaign_demos.sh 100 2
+  SUITE=object_rigid flock "$RIGID_DEMOS_LOCK" bash campaign/scripts/campaign_demos.sh 100 2
 }
 
 soft_demos() {  # 1,000 accepted Object-Soft demos rendered at 84 px
   local lock=$SOFTVT_DEMOS_DIR/.object_soft.lock
   if ! flock -n "$lock" true; then  # the other lane records them: help it from the last task down
     step "Object-Soft demos: the other lane records them from the first task; this one helps from the last"
-    SUITE=object_soft HELP_FROM_LAST=1 bash scripts/campaign_demos.sh 100 1
+    SUITE=object_soft HELP_FROM_LAST=1 bash campaign/scripts/campaign_demos.sh 100 1
   fi
   step "Object-Soft demos (waits while the other lane completes them)"
-  SUITE=object_soft flock "$lock" bash scripts/campaign_demos.sh 100 1
+  SUITE=object_soft flock "$lock" bash campaign/scripts/campaign_demos.sh 100 1
 }
 
 train_and_score() {  # SUITE VARIANT NAME [SET]: the recipe of the committed Object-Soft policies
   local suite=$1 variant=$2 name=$3 set=${4:-}
   local sub; sub=$([ "$suite" = object_soft ] || echo "$suite/")
   step "$variant on $suite as $name: training (24,000 steps), export, 500 ID episodes, report"
-  SUITE=$suite SET="steps=24000 $set" bash scripts/campaign_protocol.sh "$variant" noaug 1 "$BUDGET" "$name"
+  SUITE=$suite SET="steps=24000 $set" bash campaign/scripts/campaign_protocol.sh "$variant" noaug 1 "$BUDGET" "$name"
   if [ ! -f "$SOFTVT_RUNS_DIR/final/$sub$name/policy.pt" ]; then
     step "$name stopped at its time budget (BUDGET_MIN=$BUDGET); run the lane again to continue"; exit 0
   fi

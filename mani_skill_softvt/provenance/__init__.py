@@ -5,13 +5,16 @@ comparison of a recorded physics signature, and :data:`UPGRADES`, the table of w
 an earlier version lacks, how it is read, and what to do about it. The code that reads a file
 takes its markers and its remedies from here; the markers' histories are written here once.
 
-Computed elsewhere, named here: the physics signature is :meth:`~mani_skill_softvt.physics.config.PhysicsConfig.signature`
-(the settings of an env, with :data:`EE_ORIENTATION_AXIS_ANGLE`); the software stack and machine a
-record ran on are :mod:`mani_skill_softvt.stack`, its numerics :mod:`mani_skill_softvt.numerics`; what is
-known of sealed records that predate those is the sidecar of :mod:`mani_skill_softvt.evaluation.sidecar`.
-The campaign's own markers (``FEATURES_VERSION``, ``CACHE_FORMAT``) live with its data cache.
+Beside it in this package: :mod:`.numerics`, the CPU dispatch every library is pinned to as the
+package loads (and how a record made under earlier numerics is read), and :mod:`.stack`, the
+software stack and machine a record names. Computed with its config, compared here: the physics
+signature is :meth:`~mani_skill_softvt.physics.config.PhysicsConfig.signature` (the settings of an env,
+with :data:`EE_ORIENTATION_AXIS_ANGLE`). What is known of sealed records that predate the stack is the
+sidecar of :mod:`mani_skill_softvt.evaluation.sidecar`. The campaign's own markers
+(``FEATURES_VERSION``, ``CACHE_FORMAT``) live with its data cache; their rows are in :data:`UPGRADES`.
 
-Imports nothing of the package: everything that writes or reads a file may import it.
+This module imports nothing of the package (nor does :mod:`.numerics`): everything that writes or
+reads a file may import it, and the numerics are pinned from here before any library loads.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ def moved_data_path(path) -> str | None:
 # 2: ManiSkill's normalised action in [-1, 1] (1 open) in the joint and delta modes, the closure in
 # pd_ee_pose (the paper's mode, whose files never changed).
 GRIPPER_ACTION_VERSION = 2
-UPGRADE_COMMAND = "python -m mani_skill_softvt.replay --upgrade-gripper"
+UPGRADE_COMMAND = "python -m mani_skill_softvt.integrations.maniskill.replay --upgrade-gripper"
 GRIPPER_ACTION_VERSIONS = {  # why an older version is refused; {path}: the file
     1: "its joint- or delta-mode gripper actions are closures in [0, 1] (written before mani_skill_softvt used "
        "ManiSkill's normalised gripper action in [-1, 1] in those modes); convert the file in place with "
@@ -171,9 +174,9 @@ UPGRADES = (
             "mani_skill_softvt.evaluation.metrics:instance_outcomes"),
     Upgrade("evaluation record", "receipt.numerics", "the sidecar's numerics, else the CPU's legacy numerics, else "
             "native; replayed so", "a provenance.json sidecar beside the records",
-            "mani_skill_softvt.numerics:numerics_of"),
+            "mani_skill_softvt.provenance.numerics:numerics_of"),
     Upgrade("evaluation record", "receipt.stack (or keys of it)", "unrecorded: not a difference on reproduction",
-            "a provenance.json sidecar beside the records", "mani_skill_softvt.stack:stack_differences"),
+            "a provenance.json sidecar beside the records", "mani_skill_softvt.provenance.stack:stack_differences"),
     # Demonstration files.
     Upgrade("trajectory .json", "gripper_action_version (1)", "refused in the joint and delta modes",
             f"convert in place: {UPGRADE_COMMAND} FILE.h5", "mani_skill_softvt.data.trajectory:gripper_action_problem"),
@@ -199,6 +202,19 @@ UPGRADES = (
             RECALIBRATE, "mani_skill_softvt.calibration.cards:load_calibration_card"),
     Upgrade("calibration sweep log", "physics of a trial", "refused: trials under other physics", RECALIBRATE,
             "mani_skill_softvt.expert.calibration_trials:sweep_asset"),
+    # The campaign's policy files and training caches (campaign/softvt_campaign: it reads them).
+    Upgrade("policy file (.pt)", "tactile_model", "1: a VT policy is refused (today's frames are model 2 on the "
+            "soft suites, 3 on the rigid)", "re-render the demos and train again (docs/baselines.md)",
+            "softvt_campaign.baselines.agent:read_policy_file"),
+    Upgrade("policy file (.pt)", "camera_render_size", "trained on the native 224x224 renderings", "none needed",
+            "softvt_campaign.baselines.agent:camera_render_size"),
+    Upgrade("policy file (.pt)", "config.precision", "fp32, the reference precision", "none needed",
+            "softvt_campaign.baselines.config:DPConfig"),
+    Upgrade("training data cache", "today's CACHE_FORMAT and FEATURES_VERSION in its key", "not current: built "
+            "again from the renderings", "none needed (the next training rebuilds it)",
+            "softvt_campaign.baselines.dataset:cache_key"),
+    Upgrade("twin-pinch grasps .json", "tactile_model", "2, so refused beside today's twins' model (3)", "move it away "
+            "to re-run", "softvt_campaign.studies.twin_pinch:run"),
     # Paths.
     Upgrade("a path given to a command", "the data folders' new names (assets/, calibration/, demos/, "
             "baselines/results/ ...)", "the same file under the new name, with a note", "none needed",

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Expert demos for the baselines (docs/baselines.md), resumable across sessions: Object-Soft's
 # (the first campaign, step 1), or another suite's with SUITE=object_rigid (findings campaign, step 2).
-#   [SUITE=object_soft] bash scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
+#   [SUITE=object_soft] bash campaign/scripts/campaign_demos.sh [ACCEPTED_PER_TASK=100] [WORKERS=1] [ROUND=10] [MAX_SEEDS=250]
 #   HELP_FROM_LAST=1 ... : beside a run that holds the suite, record and render its tasks from the last down
 # Episodes live outside the checkout (SOFTVT_DEMOS_DIR, default /root/softvt-demos): a new work
 # tree on the same machine keeps them. The small products (manifest, QC logs, QC report, stats,
@@ -17,7 +17,7 @@
 # machines that keep nothing; the machine that trains runs it once more without, which records the
 # whole set (the same bits under the pinned numerics), merges and renders it.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # This checkout's campaign first: a worktree run with another checkout's venv (its editable install of
 # softvt_campaign points there) must train, export and study with the code of the commit it runs.
 export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
