@@ -133,7 +133,7 @@ def test_consumers_take_observation_keys_from_the_contract(module):
 
 def test_one_flattener_and_one_info_reader():
     for path in [*PACKAGE.rglob("*.py"), *CAMPAIGN.rglob("*.py")]:
-        if path.name == "observations.py":
+        if path == PACKAGE / "contracts" / "observations.py":
             continue
         tree = ast.parse(path.read_text())
         names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
