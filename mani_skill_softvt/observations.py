@@ -6,4 +6,5 @@ import sys
 
 from .contracts import observations as _moved
 
-sys.modules[__name__] = _moved
+if __name__ != "__main__":  # imported: be the moved module (run with -m, there is nothing to run)
+    sys.modules[__name__] = _moved

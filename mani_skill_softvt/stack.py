@@ -7,6 +7,9 @@ import sys
 from .provenance import stack as _moved
 
 if __name__ == "__main__":
+    from .cli import moved_command
+
+    moved_command("mani_skill_softvt.stack", "mani_skill_softvt.provenance.stack")
     _moved.main()
 else:
     sys.modules[__name__] = _moved

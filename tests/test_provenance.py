@@ -89,6 +89,7 @@ def test_a_policy_named_by_its_folders_old_spelling_is_one_file_with_its_new_one
     assert not same_data_path(old, "campaign-data/policies/vt-c-cpu.pt") and not same_data_path(old, None)
     assert same_data_path("./campaign-data/results/x.jsonl", "campaign-data/results/x.jsonl")
     assert same_data_path("runs/../baselines/policies/vo-c-cpu.pt", new)
+    assert not same_data_path("ws://gpu-box:8000", "ws:/gpu-box:8000") and not same_data_path("", ".")
     rec = {"policy": old, "obs_mode": "rgb", "policy_sha256": "ab", "suite": "object_soft", "task_id": 0,
            "condition": "id", "seed": 1, "success": True}
     assert is_run_record(rec, {"policy": new, "obs_mode": "rgb"}, "ab")

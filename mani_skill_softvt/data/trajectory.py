@@ -344,7 +344,7 @@ def trajectory_control_mode(meta: dict) -> str | None:
 
 def gripper_action_problem(h5_path: Path, meta: dict) -> str | None:
     """Why the gripper actions of a SoftVT trajectory file are not in this version's encoding
-    (:data:`~mani_skill_softvt.tasks.robot.GRIPPER_ACTION_VERSION`), naming the command that
+    (:data:`~mani_skill_softvt.provenance.GRIPPER_ACTION_VERSION`), naming the command that
     converts it; None if they are. Only the joint and delta modes changed: a ``pd_ee_pose`` file
     is current whatever its version."""
     mode = trajectory_control_mode(meta)

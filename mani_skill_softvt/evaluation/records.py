@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_jsonl_lines
-from ..provenance import UNHASHED, record_hash, seal  # noqa: F401  (the seal: provenance.py)
+from ..provenance import UNHASHED, record_hash, seal  # noqa: F401  (the seal: provenance/)
 from .run import recorded_camera_size
 
 

@@ -158,7 +158,7 @@ def joint_actions(env, plan: ExpertPlan):
 def mode_actions(env, plan: ExpertPlan):
     """Yield ``(phase, action)`` in the env's control mode: ``pd_ee_pose`` or ``pd_joint_pos``, or
     either's ``_binary`` twin (any commanded closure is "close"), the gripper in the mode's encoding
-    (:func:`~mani_skill_softvt.tasks.robot.gripper_action`: the closure in ``pd_ee_pose``, ManiSkill's
+    (:func:`~mani_skill_softvt.contracts.actions.gripper_action`: the closure in ``pd_ee_pose``, ManiSkill's
     normalised action in ``pd_joint_pos``)."""
     mode = env.unwrapped.control_mode
     arm = mode.removesuffix("_binary")

@@ -68,7 +68,9 @@ def same_data_path(a, b) -> bool:
 
 def _spelling(path):
     """``path`` as spelled today, normalised ('/'-separated, no ``.`` or ``..`` parts); any other value as it is."""
-    return today_data_path(posixpath.normpath(path.replace("\\", "/"))) if isinstance(path, str) else path
+    if not isinstance(path, str) or not path or "://" in path:  # not a file path (a ws:// policy, none)
+        return today_data_path(path)
+    return today_data_path(posixpath.normpath(path.replace("\\", "/")))
 
 
 def moved_data_path(path) -> str | None:

@@ -64,7 +64,7 @@ PROG = "python -m mani_skill_softvt.integrations.maniskill.replay"
 class _BinaryGripperEnv:
     """The env a converter steps, with every action's gripper made the binary command of ``mode``
     on the way in: "close" for any commanded closure > 0 (the arm mode's gripper encoding in, see
-    :func:`~mani_skill_softvt.tasks.robot.gripper_action`)."""
+    :func:`~mani_skill_softvt.contracts.actions.gripper_action`)."""
 
     def __init__(self, env, mode: str):
         self._env = env

@@ -110,7 +110,8 @@ def build_server(policy_factory, name: str, host: str = "127.0.0.1", port: int =
     from openpi_client import msgpack_numpy
     from websockets.exceptions import ConnectionClosed
 
-    metadata = {"policy": name, "server": "mani_skill_softvt.integrations.openpi.serve", "package_version": __version__,
+    # "server" keeps the name clients have seen (the module moved to integrations/openpi/ in session 30)
+    metadata = {"policy": name, "server": "mani_skill_softvt.serve", "package_version": __version__,
                 "action_space": "pd_ee_pose: (k, 7) TCP xyz in the robot base frame, axis-angle, gripper closure",
                 "episode_keys": [EPISODE_RESET, EPISODE_SEED]}
     if camera_size is not None:  # the evaluator must render its cameras at this size (evaluate --camera-size)
