@@ -820,6 +820,10 @@ def test_results_pair_a_soft_suite_with_its_rigid_twin_on_the_shared_seeds(tmp_p
     assert (c["pairs"], c["both"], c["only_a"], c["only_b"], c["neither"]) == (5, 2, 0, 2, 1)
     assert c["p_value"] == pytest.approx(0.5) and c["unpaired"] == 1 + 2
     assert not any("object_soft vo-c" in k and "vt-c" in k for k in pairs)
+    # Beside each row, the paper's Diffusion Policy entry of that suite: a twin's TSR alone (its DSR is the TSR).
+    text = (tmp_path / "results.md").read_text()
+    assert "| 37.4 / 33.6 (Diffusion Policy) |" in text and "| 40.0 / = TSR (Diffusion Policy) |" in text
+    assert report.paper_id_cell(report.PAPER_ID["spatial_soft"]["vt-c"]) == "33.0 / 25.0 (Diffusion Policy)"
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):

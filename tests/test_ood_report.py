@@ -10,8 +10,8 @@ from mani_skill_softvt.evaluation.records import record_hash
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS
 
 
-def _rec(task, i, condition, success, r_max, variant="vo-c,cpu"):
-    rec = {"suite": "object_soft", "task_id": task, "condition": condition, "seed": id_seed(task, i),
+def _rec(task, i, condition, success, r_max, variant="vo-c,cpu", suite="object_soft"):
+    rec = {"suite": suite, "task_id": task, "condition": condition, "seed": id_seed(task, i),
            "policy": f"campaign-data/policies/{variant.split(',')[0]}-cpu.pt", "success": success,
            "dsr_success": success and r_max <= 1.0, "r_max": r_max, "termination": "success" if success else "timeout",
            "collapsed_steps": 0, "receipt": {"policy": f"diffusion_policy[{variant}]"}}
@@ -79,3 +79,24 @@ def test_twins_from_the_ood_machine_replace_the_committed_ones(tmp_path):
     with pytest.raises(SystemExit):
         O.main([str(tmp_path / "object_soft_ood_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out"),
                 "--twins", str(tmp_path / "nowhere")])
+
+
+def test_both_soft_suites_in_one_report_each_beside_its_own_paper_entry(tmp_path):
+    """A Spatial-Soft run is named with its suite, read against the paper's Spatial-Soft row, and VT is
+    compared with VO within a suite only."""
+    files = {}
+    for suite in ("object_soft", "spatial_soft"):
+        for variant in ("vo-c,cpu", "vt-c,cpu"):
+            name = variant.split(",")[0]
+            files[f"{suite}_id_{name}-cpu"] = [_rec(0, i, "id", True, 0.5, variant, suite) for i in range(10)]
+            files[f"{suite}_ood_{name}-cpu"] = [_rec(0, i, "light_67.5", i < 2, 0.5, variant, suite) for i in range(10)]
+    for name, records in files.items():
+        (tmp_path / f"{name}.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    runs, _ = O.load_runs([tmp_path / f"{n}.jsonl" for n in files if "_ood_" in n])
+    assert set(runs) == {"vo-c,cpu", "vt-c,cpu", "vo-c,cpu (spatial_soft)", "vt-c,cpu (spatial_soft)"}
+    result = O.analyse(runs)
+    assert set(result["vo_vs_vt"]) == {"vt-c,cpu vs vo-c,cpu", "vt-c,cpu (spatial_soft) vs vo-c,cpu (spatial_soft)"}
+    text = O.build(result)
+    assert "| light_67.5 | 20 / 20 (10) | 20 / 20 (10) | 20 / 20 (10) | 20 / 20 (10) | 0 / 0 | 1 / 1 | 0 / 0 | 19 / 14 |" in text
+    assert "11.0 (-4.6) / 8.8 (-4.6)" in text and "25.2 (-7.8) / 17.8 (-7.2)" in text  # the paper's pooled Spatial-Soft rows
+    assert all(len(O.PAPER_DP_OOD[s][v]) == len(OOD_CONDITIONS) for s in O.PAPER_DP_OOD for v in O.PAPER_DP_OOD[s])

@@ -41,18 +41,34 @@ from mani_skill_softvt.fileio import atomic_write, atomic_write_json
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, PhysicalFactors
 from .results import variant_of
 
-# The paper's per-condition OOD table for Diffusion Policy on Object-Soft (TSR, DSR %; 100 episodes each),
-# and its pooled OOD row with the change against its ID entry.
-PAPER_DP_OBJECT_SOFT = {
-    "vo-c": {"light_67.5": (0, 0), "light_180": (37, 33), "light_270": (0, 0), "mass_x1.25": (41, 38),
-             "mass_x1.75": (40, 35), "mass_x2.5": (36, 33), "youngs_modulus_x0.5": (33, 32),
-             "youngs_modulus_x0.8": (37, 31), "youngs_modulus_x2.0": (39, 37)},
-    "vt-c": {"light_67.5": (1, 1), "light_180": (36, 30), "light_270": (0, 0), "mass_x1.25": (42, 34),
-             "mass_x1.75": (43, 38), "mass_x2.5": (33, 27), "youngs_modulus_x0.5": (41, 30),
-             "youngs_modulus_x0.8": (45, 33), "youngs_modulus_x2.0": (39, 32)},
+# The paper's per-condition OOD table for Diffusion Policy, by soft suite (TSR, DSR %; 100 episodes each;
+# its light levels x0.5, x1.33, x2.0 are ours at 67.5, 180, 270), and its pooled OOD row with the change
+# against its ID entry (TSR, dTSR, DSR, dDSR).
+PAPER_DP_OOD = {
+    "object_soft": {
+        "vo-c": {"light_67.5": (0, 0), "light_180": (37, 33), "light_270": (0, 0), "mass_x1.25": (41, 38),
+                 "mass_x1.75": (40, 35), "mass_x2.5": (36, 33), "youngs_modulus_x0.5": (33, 32),
+                 "youngs_modulus_x0.8": (37, 31), "youngs_modulus_x2.0": (39, 37)},
+        "vt-c": {"light_67.5": (1, 1), "light_180": (36, 30), "light_270": (0, 0), "mass_x1.25": (42, 34),
+                 "mass_x1.75": (43, 38), "mass_x2.5": (33, 27), "youngs_modulus_x0.5": (41, 30),
+                 "youngs_modulus_x0.8": (45, 33), "youngs_modulus_x2.0": (39, 32)},
+    },
+    "spatial_soft": {
+        "vo-c": {"light_67.5": (0, 0), "light_180": (18, 15), "light_270": (16, 9), "mass_x1.25": (5, 5),
+                 "mass_x1.75": (6, 6), "mass_x2.5": (5, 5), "youngs_modulus_x0.5": (19, 13),
+                 "youngs_modulus_x0.8": (17, 16), "youngs_modulus_x2.0": (13, 10)},
+        "vt-c": {"light_67.5": (19, 14), "light_180": (28, 16), "light_270": (17, 13), "mass_x1.25": (18, 17),
+                 "mass_x1.75": (18, 17), "mass_x2.5": (17, 15), "youngs_modulus_x0.5": (38, 23),
+                 "youngs_modulus_x0.8": (34, 20), "youngs_modulus_x2.0": (37, 25)},
+    },
 }
-PAPER_DP_POOLED = {"vo-c": (29.2, -8.2, 26.6, -7.0), "vt-c": (31.2, -8.8, 25.0, -5.4)}  # TSR, dTSR, DSR, dDSR
-# The paper's stiffness table for Diffusion Policy (E scale -> TSR, DSR, R_max median, IQR).
+PAPER_DP_POOLED_BY_SUITE = {
+    "object_soft": {"vo-c": (29.2, -8.2, 26.6, -7.0), "vt-c": (31.2, -8.8, 25.0, -5.4)},
+    "spatial_soft": {"vo-c": (11.0, -4.6, 8.8, -4.6), "vt-c": (25.2, -7.8, 17.8, -7.2)},
+}
+PAPER_DP_OBJECT_SOFT = PAPER_DP_OOD["object_soft"]  # the Object findings read these
+PAPER_DP_POOLED = PAPER_DP_POOLED_BY_SUITE["object_soft"]
+# The paper's stiffness table for Diffusion Policy on Object-Soft (E scale -> TSR, DSR, R_max median, IQR).
 PAPER_DP_STIFFNESS = {
     "vo-c": {1.0: (42, 39, 0.63, (0.47, 0.75)), 0.5: (33, 32, 0.66, (0.06, 0.76)), 0.8: (37, 31, 0.63, (0.06, 0.79)),
              2.0: (39, 37, 0.60, (0.37, 0.71))},
@@ -63,8 +79,9 @@ STIFFNESS = {0.5: "youngs_modulus_x0.5", 0.8: "youngs_modulus_x0.8", 1.0: "id", 
 
 
 def paper_key(variant: str) -> str:
-    """``vt-c,cpu,rgb+depth`` -> ``vt-c``: the paper's configuration a variant corresponds to."""
-    return variant.split(",")[0]
+    """``vt-c,cpu,rgb+depth`` (or ``vt-c,cpu (spatial_soft)``) -> ``vt-c``: the paper's configuration a
+    variant corresponds to."""
+    return variant.split(",")[0].split(" ")[0]
 
 
 def id_twins(ood: list[dict], id_records: list[dict]) -> list[dict]:
@@ -113,7 +130,7 @@ def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str
                 s = summarize(sel)
                 stiffness[scale] = {"episodes": s["episodes"], "tsr": s["tsr"], "dsr": s["dsr"], "r_max": r_max_stats(sel)}
         out["variants"][variant] = {
-            "pooled": summarize(ood), "id": summarize(id_records) if id_records else None,
+            "suite": ood[0]["suite"], "pooled": summarize(ood), "id": summarize(id_records) if id_records else None,
             "id_twins": summarize(twins) if twins else None,
             "paired_tsr": against_twins(ood, twins, "success"), "paired_dsr": against_twins(ood, twins, "dsr_success"),
             "per_condition": {c: summarize(by_condition[c]) for c in OOD_CONDITIONS if by_condition.get(c)},
@@ -123,7 +140,7 @@ def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str
     vo = [v for v in names if paper_key(v).startswith("vo")]
     vt = [v for v in names if paper_key(v).startswith("vt")]
     for a in vo:
-        for b in vt:
+        for b in (b for b in vt if runs[b][0][0]["suite"] == runs[a][0][0]["suite"]):
             oa, ob = runs[a][0], runs[b][0]
             per = {}
             for c in OOD_CONDITIONS:
@@ -133,6 +150,12 @@ def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str
             out["vo_vs_vt"][f"{b} vs {a}"] = {"pooled_tsr": paired_comparison(ob, oa, "success"),
                                              "pooled_dsr": paired_comparison(ob, oa, "dsr_success"), "per_condition": per}
     return out
+
+
+def paper_condition(suite: str, variant: str, condition: str) -> str:
+    """The paper's Diffusion Policy TSR / DSR for ``variant`` on ``suite`` under ``condition``, or '-'."""
+    paper = PAPER_DP_OOD.get(suite, {}).get(paper_key(variant), {}).get(condition)
+    return "{} / {}".format(*paper) if paper else "-"
 
 
 def _points(x: float) -> str:
@@ -146,7 +169,9 @@ def _iqr(stats: dict) -> str:
 
 
 def build(result: dict) -> str:
-    lines = ["# OOD protocol on Object-Soft (the paper's Finding 4)", "",
+    suites = sorted({r["suite"] for r in result["variants"].values()})
+    titles = [s.replace("_", "-").title() for s in suites]  # object_soft -> Object-Soft, as the paper names them
+    lines = [f"# OOD protocol on {' and '.join(titles)} (the paper's Finding 4)", "",
              "Nine held-out single-factor conditions x 10 tasks x 10 episodes = 900 per variant, each from an ID "
              "episode's initial state. Changes against ID: the paper's Delta is against its full ID entry (here all "
              "50 ID episodes of each task the OOD records hold, 500 when complete); *paired* is against the ID twins "
@@ -157,7 +182,7 @@ def build(result: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for v, r in result["variants"].items():
         p, i = r["pooled"], r["id"]
-        paper = PAPER_DP_POOLED.get(paper_key(v))
+        paper = PAPER_DP_POOLED_BY_SUITE.get(r["suite"], {}).get(paper_key(v))
         paper_txt = f"{paper[0]} ({paper[1]:+}) / {paper[2]} ({paper[3]:+})" if paper else "-"
         lines.append(
             f"| {v} | {p['episodes']} | {percent_ci(p['tsr'], p['tsr_ci95'])} | {percent_ci(p['dsr'], p['dsr_ci95'])} | "
@@ -174,8 +199,7 @@ def build(result: dict) -> str:
         for v in variants:
             s = result["variants"][v]["per_condition"].get(c)
             cells.append(f"{percent(s['tsr'], 0)} / {percent(s['dsr'], 0)} ({s['episodes']})" if s else "-")
-        papers = [("{} / {}".format(*PAPER_DP_OBJECT_SOFT[paper_key(v)][c]) if paper_key(v) in PAPER_DP_OBJECT_SOFT
-                   else "-") for v in variants]
+        papers = [paper_condition(result["variants"][v]["suite"], v, c) for v in variants]
         lines.append(f"| {c} | " + " | ".join(cells) + " | " + " | ".join(papers) + " |")
     lines += ["", "## Under stiffness shift (the paper's stiffness table; x1.0 is the ID twins)", "",
               "| E scale | variant | TSR % | DSR % | R_max median [IQR] | N | paper DP: TSR / DSR / R_max median [IQR] |",
@@ -185,7 +209,8 @@ def build(result: dict) -> str:
             s = result["variants"][v]["stiffness"].get(scale)
             if not s:
                 continue
-            paper = PAPER_DP_STIFFNESS.get(paper_key(v), {}).get(scale)
+            on_object_soft = result["variants"][v]["suite"] == "object_soft"
+            paper = PAPER_DP_STIFFNESS.get(paper_key(v), {}).get(scale) if on_object_soft else None
             paper_txt = (f"{paper[0]} / {paper[1]} / {paper[2]:.2f} [{paper[3][0]:.2f}, {paper[3][1]:.2f}]"
                          if paper else "-")
             lines.append(f"| x{scale:g} | {v} | {percent(s['tsr'], 0)} | {percent(s['dsr'], 0)} | {_iqr(s['r_max'])} | "
@@ -258,6 +283,8 @@ def load_runs(paths: list[Path], twins: Path | None = None, twins_required: bool
         if len(shas) > 1:
             raise ValueError(f"{path} and {id_path} were made with different policy files (their policy_sha256 differ)")
         variant = variant_of(next((r for r in ood if r["receipt"].get("policy")), ood[0]))  # a worker_died record names none
+        if ood[0]["suite"] != "object_soft":  # one report may hold both soft suites' runs of one variant
+            variant = f"{variant} ({ood[0]['suite']})"
         if variant in runs:
             raise ValueError(f"two files of variant {variant}: {path} and another; report one run of each")
         runs[variant] = (ood, id_records)

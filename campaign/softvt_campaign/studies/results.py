@@ -40,14 +40,25 @@ from mani_skill_softvt.fileio import atomic_write, atomic_write_json
 from mani_skill_softvt.provenance import today_data_path
 from mani_skill_softvt.tasks.suites import get_suite, task_spec
 
-# The paper's ID results on Object-Soft (main results table; the binary ablation table). Its B
-# variants are pi0.5's ablations, not Diffusion Policy's: the paper trains no binary DP.
-PAPER_OBJECT_SOFT = {
-    "vo-c": ("Diffusion Policy", 37.4, 33.6),
-    "vt-c": ("Diffusion Policy", 40.0, 30.4),
-    "vo-b": ("pi0.5 (binary ablation)", 30.2, 27.2),
-    "vt-b": ("pi0.5 (binary ablation)", 41.0, 28.0),
+# The paper's ID results by suite (its main results table, Diffusion Policy; the binary ablation
+# table, whose B variants are pi0.5's: the paper trains no binary DP; the rigid-twin table, which
+# reports TSR alone since DSR coincides with it on twins): model, TSR, DSR (None: not reported).
+PAPER_ID = {
+    "object_soft": {"vo-c": ("Diffusion Policy", 37.4, 33.6), "vt-c": ("Diffusion Policy", 40.0, 30.4),
+                    "vo-b": ("pi0.5 (binary ablation)", 30.2, 27.2), "vt-b": ("pi0.5 (binary ablation)", 41.0, 28.0)},
+    "spatial_soft": {"vo-c": ("Diffusion Policy", 15.6, 13.4), "vt-c": ("Diffusion Policy", 33.0, 25.0)},
+    "object_rigid": {"vo-c": ("Diffusion Policy", 40.0, None), "vt-c": ("Diffusion Policy", 35.0, None)},
+    "spatial_rigid": {"vo-c": ("Diffusion Policy", 14.0, None), "vt-c": ("Diffusion Policy", 11.0, None)},
 }
+PAPER_OBJECT_SOFT = PAPER_ID["object_soft"]  # the Object findings read these
+
+
+def paper_id_cell(paper: tuple | None) -> str:
+    """``37.4 / 33.6 (Diffusion Policy)``; a twin's ``40.0 / = TSR (...)``; ``-`` where the paper has none."""
+    if paper is None:
+        return "-"
+    model, tsr, dsr = paper
+    return f"{tsr} / {'= TSR' if dsr is None else dsr} ({model})"
 
 
 LEGACY_MARK = " [old physics]"  # ends the row label of records made under an older physics or sensor
@@ -203,12 +214,12 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
     for (suite, condition, variant), recs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "id", kv[0][2])):
         s = summarize(recs)
         protocol = {"id": "ID", "side_swap": "side swap", "placement_x2": "placement x2"}.get(condition, f"OOD {condition}")
-        paper = PAPER_OBJECT_SOFT.get(variant.split(",")[0].split(" ")[0]) if suite == "object_soft" and condition == "id" else None
+        paper = PAPER_ID.get(suite, {}).get(variant.split(",")[0].split(" ")[0]) if condition == "id" else None
         rows[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
         lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
                      f"| {percent_ci(s['dsr'], s['dsr_ci95'])} | {percent_ci(s['gap'], s['gap_ci95'])} "
                      f"| {percent_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
-                     f"| {f'{paper[1]} / {paper[2]} ({paper[0]})' if paper else '-'} |")
+                     f"| {paper_id_cell(paper)} |")
     columns = (*ENDINGS, "past tolerance (R_max > 1, collapsed or blown up), any end", "a tet collapsed", "median R_max")
     lines += ["", "| variant | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for key, s in rows.items():
