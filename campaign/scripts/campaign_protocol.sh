@@ -14,6 +14,7 @@
 #    pre-registered design scores extra training seeds on the first 25), resumable, into campaign-data/results/;
 # 4. writes the report beside the paper's numbers (both Object suites, so a rigid-twin variant is
 #    paired with its soft one), the old-physics rows kept apart.
+# A policy exported in an earlier session, whose run this machine lacks, is scored as committed (step 3 on).
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
 # Object-Soft runs keep the unprefixed paths they were made with.
 set -euo pipefail
@@ -31,6 +32,11 @@ sub=$([ "$SUITE" = object_soft ] || echo "$SUITE/")
 run=$SOFTVT_RUNS_DIR/final/$sub$NAME
 policy=campaign-data/policies/$sub$NAME.pt
 read -r -a sets <<< "${SET:-}"
+if [ -f "$policy" ] && [ ! -f "$run/policy.pt" ]; then
+  # Exported in an earlier session whose run is gone (a new machine keeps no runs): training again
+  # would make another policy, so the committed one is scored as it is.
+  echo "$policy was exported before and $run holds no finished run: scoring the committed policy"
+else
 "$PY" -m softvt_campaign.baselines.train --variant "$VARIANT" --recipe "$RECIPE" --set threads=1 "suite=$SUITE" \
   "${sets[@]}" --demos "$SOFTVT_DEMOS_DIR" --out "$run" --cache "$SOFTVT_RUNS_DIR/data_cache" --budget-min "$BUDGET" \
   --snapshot-every 3000
@@ -39,6 +45,7 @@ if [ ! -f "$run/policy.pt" ]; then
 fi
 mkdir -p "$(dirname "$policy")"
 "$PY" -m softvt_campaign.baselines.export "$run/policy.pt" "$policy" --if-changed
+fi
 "$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task "${PER_TASK:-50}" \
   --workers "$WORKERS" --out campaign-data/results
 shopt -s nullglob

@@ -11,7 +11,12 @@
 #    $SOFTVT_RUNS_DIR, exported to campaign-data/policies/SUITE/NAME.pt (commit it as soon as it is
 #    there: a training outlives a session only as its exported policy), then scored on PER_TASK ID
 #    episodes of each task into campaign-data/results/ (resumable: run the same command again).
-# A rigid suite's VO training (75 min on one core) fits one session after its demos; a soft suite's
+#    The training takes both cores (THREADS, default 2: torch's intra-op threads, which change the
+#    order of its float sums, not the recipe; 7.2 steps/s, 56 min for VO on an AMD EPYC, against about
+#    5.5 on one), and so does the scoring (two workers).
+# Run again in a later session once the policy is committed, it skips the demos and the training and
+# scores what is left.
+# A rigid suite's VO training fits one session after its demos; a soft suite's
 # demos alone take about two hours of both cores, so its trainings wait for a machine that keeps the
 # stores between sessions. Run it from a worktree at a fixed commit, e.g.
 #   git worktree add /work/camp HEAD && cd /work/camp && PY=/work/main/.venv/bin/python nohup bash \
@@ -26,9 +31,16 @@ SUITE=$1; VARIANT=$2; NAME=$3; SEED=${4:-0}; PER_TASK=${5:-50}
 export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 export PY=${PY:-.venv/bin/python}
-printf '\n[campaign session] %s  %s demos: recorded again, merged, rendered (two workers)\n' "$(date -u +%H:%M:%S)" "$SUITE"
-SCREEN_ONLY=0 HELP_FROM_LAST= RENDER_SIZE=84x84 SUITE=$SUITE bash campaign/scripts/campaign_demos.sh 100 2
+THREADS=${THREADS:-2}
+sub=$([ "$SUITE" = object_soft ] || echo "$SUITE/")
+if [ -f "campaign-data/policies/$sub$NAME.pt" ]; then
+  # Trained and exported in an earlier session: only its scoring is left, which needs no demos.
+  printf '\n[campaign session] %s  %s is committed: scoring it only\n' "$(date -u +%H:%M:%S)" "campaign-data/policies/$sub$NAME.pt"
+else
+  printf '\n[campaign session] %s  %s demos: recorded again, merged, rendered (two workers)\n' "$(date -u +%H:%M:%S)" "$SUITE"
+  SCREEN_ONLY=0 HELP_FROM_LAST= RENDER_SIZE=84x84 SUITE=$SUITE bash campaign/scripts/campaign_demos.sh 100 2
+fi
 printf '\n[campaign session] %s  %s %s seed %s: train, export, %s ID episodes a task\n' "$(date -u +%H:%M:%S)" \
   "$SUITE" "$VARIANT" "$SEED" "$PER_TASK"
-SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED" bash campaign/scripts/campaign_protocol.sh "$VARIANT" noaug 1 100000 "$NAME"
+SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED threads=$THREADS" bash campaign/scripts/campaign_protocol.sh "$VARIANT" noaug 2 100000 "$NAME"
 printf '\n[campaign session] %s  done\n' "$(date -u +%H:%M:%S)"
