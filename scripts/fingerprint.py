@@ -5,6 +5,7 @@ checking a code move bit for bit on one machine:
 
     .venv/bin/python scripts/fingerprint.py --out before.json              # at the old commit
     .venv/bin/python scripts/fingerprint.py --compare before.json          # at the new one: exit 1 on a difference
+    .venv/bin/python scripts/fingerprint.py --golden tests/golden/fingerprints.json   # on a new machine kind
 
 Under the pinned numerics (the default; mani_skill_softvt/provenance/numerics.py) the fingerprints are the
 same on any x86-64 machine; ``tests/test_numerics.py`` checks them against the committed goldens.
@@ -29,23 +30,49 @@ DEFAULT_CASES = ["expert_soft", "expert_rigid", "tactile_frame", "dp_inference",
                  "record"]
 
 
-def write_golden(path: Path, prints: dict) -> None:
-    """The goldens: per case its hashes (no per-step ones), with the numerics and machine they were made on."""
+HASHES = ("episode", "states", "rgb", "tactile", "pressure", "rigid", "geometric", "losses", "weights")
+
+
+def hashes_of(case: dict) -> dict:
+    """A case's hashes (what a golden vouches for), without its per-step ones and its provenance."""
+    return {k: v for k, v in case.items() if k in HASHES}
+
+
+def read_fingerprints(path: Path) -> dict:
+    """Per case, its fingerprints from a file of ``--out`` or of goldens (whose cases sit under "cases")."""
+    data = json.loads(path.read_text())
+    return data["cases"] if "cases" in data else {k: v for k, v in data.items() if k != "numerics"}
+
+
+def write_golden(path: Path, prints: dict, remake: bool = False) -> list[str]:
+    """Record this machine in each case's ``passed_on`` where its hashes are the golden ones; a case
+    new to the file is made here. A case that differs is left as it is and returned, unless ``remake``
+    (the code changed what it computes): then it is made here, and only here has it passed."""
     numerics = prints["numerics"]
     if not numerics["pinned"]:
         raise SystemExit(f"goldens are made under pinned numerics; these are {numerics['name']!r}, not pinned in full")
     old = json.loads(path.read_text()) if path.exists() else {"cases": {}}
-    cases = {**old["cases"], **{c: {k: v for k, v in p.items() if k != "per_step"} for c, p in prints.items()
-                                if c != "numerics"}}
     cpu, flags = machine_kind(software_stack())
     here = f"{cpu} ({' '.join(flags)})"
-    # A case whose hashes changed has passed only here: the machines the old goldens passed on no longer vouch.
-    changed = any(old["cases"].get(c) not in (None, cases[c]) for c in cases)
-    passed = {here} if changed else set(old.get("passed_on", [])) | {here}
+    cases, differ = dict(old["cases"]), []
+    for c, p in prints.items():
+        if c == "numerics":
+            continue
+        made = {k: v for k, v in p.items() if k != "per_step"}
+        before = old["cases"].get(c)
+        if before is not None and hashes_of(before) != hashes_of(made) and not remake:
+            differ.append(c)
+        elif before is not None and hashes_of(before) == hashes_of(made):
+            cases[c] = {**before, "passed_on": sorted({*before.get("passed_on", []), here})}
+        else:
+            cases[c] = {**made, "made_on": here, "passed_on": [here]}
     golden = {"numerics": numerics["name"], "warp_cpu_compiler_flags": numerics["warp_cpu_compiler_flags"],
-              "made_on": here, "passed_on": sorted(passed), "cases": cases}
+              "cases": cases}
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(golden, indent=1) + "\n")
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(golden, indent=1) + "\n")
+    tmp.replace(path)
+    return differ
 
 
 def main(argv=None) -> int:
@@ -56,8 +83,10 @@ def main(argv=None) -> int:
                    help="the policy whose record is fingerprinted")
     p.add_argument("--suite", default="object_rigid", help="the suite of that record")
     p.add_argument("--cases", nargs="+", default=DEFAULT_CASES, choices=sorted(CASES))
-    p.add_argument("--golden", type=Path, help="write the cases' hashes as the tests' goldens (tests/golden/"
-                   "fingerprints.json), keeping the machines the goldens have passed on")
+    p.add_argument("--golden", type=Path, help="check the cases against the tests' goldens (tests/golden/"
+                   "fingerprints.json) and add this machine to each matching case's passed_on; exit 1 on a difference")
+    p.add_argument("--remake", action="store_true", help="with --golden: make the cases that differ here (the code "
+                   "changed what they compute; the other machines they passed on no longer vouch for them)")
     args = p.parse_args(argv)
     runs = {**CASES, "record": lambda: policy_record(args.policy, args.suite)}
     prints = {"numerics": resolved()}
@@ -69,10 +98,18 @@ def main(argv=None) -> int:
     if args.out:
         args.out.write_text(json.dumps(prints, indent=1))
     if args.golden:
-        write_golden(args.golden, prints)
+        kept = write_golden(args.golden, prints, remake=args.remake)
+        for c in kept:
+            print(f"DIFFERS from the golden: {c} (left as it was; --remake makes it here)")
+        if kept:
+            return 1
     if args.compare:
-        before = json.loads(args.compare.read_text())
-        differ = [c for c in args.cases if c in before and before[c]["episode"] != prints[c]["episode"]]
+        before = read_fingerprints(args.compare)
+        missing = [c for c in args.cases if c not in before]
+        if missing:  # a comparison that compares nothing must not read as a pass
+            print(f"{args.compare} has no fingerprints of {', '.join(missing)}: nothing to compare them with")
+            return 1
+        differ = [c for c in args.cases if hashes_of(before[c]) != hashes_of(prints[c])]
         for c in differ:
             a, b = before[c].get("per_step", []), prints[c].get("per_step", [])
             first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))

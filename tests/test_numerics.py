@@ -61,12 +61,16 @@ def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch)
     (pinned,) = [v for k, v in run_tasks(_pinned_variables, [()], 1) if k == "result"]
     assert pinned == ("x86-64-v3", {"ATEN_CPU_CAPABILITY": "avx2", "OPENBLAS_CORETYPE": "Haswell"}, "AVX2")
     # A record made before the pins replays under each library's own choice, whatever this process has.
+    # The shell's own settings, not the pins (this workplace's AMD EPYC machines set OPENBLAS_CORETYPE=Haswell).
+    shell = json.loads(os.environ[N.ORIGINAL_ENV])
     (native,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="native") if k == "result"]
-    assert native[:2] == ("native", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": None})
+    assert native[:2] == ("native", {"ATEN_CPU_CAPABILITY": shell.get("ATEN_CPU_CAPABILITY"),
+                                     "OPENBLAS_CORETYPE": shell.get("OPENBLAS_CORETYPE")})
     assert os.environ["ATEN_CPU_CAPABILITY"] == "avx2"  # this process's own pins are as they were
     # A part pinned alone: the others are the shell's in the worker, and its records are not "pinned".
     (part,) = [v for k, v in run_tasks(_pinned_variables, [()], 1, numerics="x86-64-v3:openblas") if k == "result"]
-    assert part[:2] == ("x86-64-v3:openblas", {"ATEN_CPU_CAPABILITY": None, "OPENBLAS_CORETYPE": "Haswell"})
+    assert part[:2] == ("x86-64-v3:openblas", {"ATEN_CPU_CAPABILITY": shell.get("ATEN_CPU_CAPABILITY"),
+                                               "OPENBLAS_CORETYPE": "Haswell"})
 
 
 def test_a_bfloat16_training_releases_onednn_alone_and_says_so():
@@ -86,7 +90,7 @@ def test_a_record_names_its_numerics_and_a_reproduction_is_told_about_the_machin
                                                                        "onednn_max=AVX2"})
     assert "their outcomes may differ here" in N.reproduction_note(old, xeon)
     assert "do not name their machine" in N.reproduction_note({"receipt": {}}, xeon)
-    pinned = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True}}}
+    pinned = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True, "parts": list(N.PARTS)}}}
     assert N.numerics_of(pinned) == "x86-64-v3" and N.reproduction_note(pinned, xeon) is None
 
 
@@ -103,12 +107,61 @@ def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earli
     xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
     earlier = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
                                                        "environment": {"MKL_CBWR": "AVX2"}}}}
-    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
+    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True, "parts": list(N.PARTS),
                                                      "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
     assert N.numerics_of(earlier) == N.PINNED_MKL_AVX2 and N.numerics_of(today) == N.PINNED
     assert "may differ" in N.reproduction_note(earlier, xeon)
     assert "same vendor" in N.reproduction_note(earlier, {**epyc, "cpu": "AMD EPYC 9R14"})
     assert N.reproduction_note(today, xeon) is None
+
+
+def test_a_policys_keypoints_take_no_blas_under_the_pins_and_earlier_records_replay_through_mkls_gemv():
+    """MKL's GEMV on AMD ignores MKL_CBWR, so the spatial softmax's expected coordinates are ATen's
+    reduction under the pins: the same keypoints up to rounding, and no MKL call in a policy's
+    inference. Records of the earlier pins (named x86-64-v3, without "parts") replay as made."""
+    import torch
+
+    from softvt_campaign.baselines.networks import SpatialSoftmax
+
+    assert "keypoints" in N.parse(N.PINNED).parts and N.parse(N.PINNED_GEMV_KEYPOINTS).name == N.PINNED_GEMV_KEYPOINTS
+    assert "keypoints" not in N.parse(N.PINNED_GEMV_KEYPOINTS).parts and N.resolved()["parts"] == list(N.PARTS)
+    x = torch.randn(2, 4, 6, 5, generator=torch.Generator().manual_seed(0))
+    pinned = SpatialSoftmax()(x)
+    w = torch.softmax(x.reshape(2, 4, 30).double(), -1)
+    grid_y, grid_x = torch.meshgrid(torch.linspace(-1, 1, 6, dtype=torch.float64),
+                                    torch.linspace(-1, 1, 5, dtype=torch.float64), indexing="ij")
+    exact = torch.cat([w @ grid_x.reshape(-1), w @ grid_y.reshape(-1)], -1)
+    # float32 sums of 30 terms in [-1, 1] with weights summing to 1: within a few ulp of 1.
+    assert torch.allclose(pinned.double(), exact, atol=30 * 2 ** -24, rtol=0)
+    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
+    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
+    earlier = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
+                                                       "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
+    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True, "parts": list(N.PARTS),
+                                                     "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
+    assert N.numerics_of(earlier) == N.PINNED_GEMV_KEYPOINTS and N.numerics_of(today) == N.PINNED
+    assert "GEMV" in N.reproduction_note(earlier, xeon) and "may differ" in N.reproduction_note(earlier, xeon)
+    assert "same vendor" in N.reproduction_note(earlier, epyc) and N.reproduction_note(today, xeon) is None
+
+
+def test_a_fingerprint_comparison_that_finds_nothing_to_compare_fails(tmp_path, monkeypatch, capsys):
+    """scripts/fingerprint.py --compare once read the goldens' file (cases under "cases") as empty and
+    printed "identical": a comparison without the cases it was asked for is a failure."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fingerprint_script", Path(__file__).parents[1] / "scripts" /
+                                                  "fingerprint.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(script, "CASES", {"cheap": lambda: {"episode": "abc"}})
+    golden = tmp_path / "golden.json"
+    golden.write_text(json.dumps({"cases": {"cheap": {"episode": "abc", "made_on": "x", "passed_on": ["x"]}}}))
+    assert script.main(["--cases", "cheap", "--compare", str(golden)]) == 0
+    golden.write_text(json.dumps({"cases": {"cheap": {"episode": "abd"}}}))
+    assert script.main(["--cases", "cheap", "--compare", str(golden)]) == 1
+    golden.write_text(json.dumps({"cases": {}}))
+    assert script.main(["--cases", "cheap", "--compare", str(golden)]) == 1
+    assert "nothing to compare" in capsys.readouterr().out
 
 
 # ------------------------------------------------------------------------------------ goldens
@@ -117,10 +170,10 @@ def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earli
 def _same(case: str, got: dict, parts=("episode",)) -> None:
     want = GOLDEN["cases"][case]
     moved = [p for p in parts if got[p] != want[p]]
-    assert not moved, (f"{case}: {', '.join(moved)} differ from the goldens made on {GOLDEN['made_on']} under "
-                       f"{GOLDEN['numerics']} (passed on {'; '.join(GOLDEN['passed_on'])}): some CPU dispatch is "
-                       "not pinned on this machine, or the code changed what it computes (then regenerate: "
-                       "scripts/fingerprint.py --golden tests/golden/fingerprints.json)")
+    assert not moved, (f"{case}: {', '.join(moved)} differ from the golden made on {want['made_on']} under "
+                       f"{GOLDEN['numerics']} (passed on {'; '.join(want['passed_on'])}): some CPU dispatch is "
+                       "not pinned on this machine, or the code changed what it computes (then make it again: "
+                       "scripts/fingerprint.py --golden tests/golden/fingerprints.json --remake)")
 
 
 def test_goldens_were_made_under_the_pins_this_package_sets():

@@ -21,7 +21,7 @@ def test_a_sidecar_entry_fills_in_what_a_file_does_not_say(tmp_path):
     assert P.numerics(stackless, entry) == "x86-64-v3:openblas (per sidecar)"
     assert P.numerics(stackless) == "native (before the pins)"
     # A record's own stack wins over the sidecar.
-    named = [{"receipt": {"stack": EPYC, "numerics": {"name": "x86-64-v3"}}}]
+    named = [{"receipt": {"stack": EPYC, "numerics": {"name": "x86-64-v3", "parts": list(N.PARTS)}}}]
     assert P.machine(named, {"cpu": "other"}) == "AMD EPYC (avx512_bf16 avx512f avx2 fma)"
     assert P.numerics(named, entry) == "x86-64-v3"
     assert N.numerics_of(stackless[0], entry) == "x86-64-v3:openblas" and N.numerics_of(stackless[0]) == "native"

@@ -47,7 +47,7 @@ def machine(records: list[dict], entry: dict | None = None) -> str:
 
 def numerics(records: list[dict], entry: dict | None = None) -> str:
     """The numerics a file's records name, else the sidecar's, else ``native (before the pins)``."""
-    # numerics_of: records of the earlier pins carry today's name, and their MKL variable tells them apart.
+    # numerics_of: records of the earlier pins carry today's name; their MKL variable or lack of parts tells them apart.
     named = {numerics_of(r) for r in records if (r.get("receipt") or {}).get("numerics")}
     if named:
         return "; ".join(sorted(named))

@@ -69,6 +69,12 @@ PARTS: dict[str, dict[str, str]] = {
     # chunk by 1e-6). COMPATIBLE (SSE2 without rcpps/rsqrtps) is the branch MKL keeps the same on
     # Intel and compatible CPUs; a DP chunk measured no slower under it (0.40 s against 0.43 s).
     "mkl": {"MKL_CBWR": "COMPATIBLE", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
+    # The one float32 BLAS product of a policy's inference, the spatial softmax's expected keypoint
+    # coordinates (softvt_campaign/baselines/networks.py), done as ATen's reduction, not MKL's GEMV:
+    # MKL's GEMV path on AMD ignores MKL_CBWR (measured: AUTO, COMPATIBLE and AVX512 the same bits),
+    # and an AMD EPYC's action chunk differed from an Intel Xeon's by 1e-6 under COMPATIBLE. Set in
+    # code, not by a variable: the networks read the choice.
+    "keypoints": {},
     "openblas": {"OPENBLAS_CORETYPE": "Haswell"},  # NumPy's linear algebra (the Kabsch SVD of D_t)
     "numpy": {"NPY_DISABLE_CPU_FEATURES": _AVX512_NUMPY},  # NumPy's own SIMD loops (exp, sin, sort...)
     "opencv": {"OPENCV_CPU_DISABLE": _AVX512_OPENCV} if _AVX512_OPENCV else {},  # the tactile optics' resizes
@@ -83,8 +89,11 @@ LEGACY_PARTS: dict[str, dict[str, str]] = {
     "mkl-avx2": {"MKL_CBWR": "AVX2", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
 }
 _ALL_PARTS = {**PARTS, **LEGACY_PARTS}
-# The pinned choice of the earlier pins, as numerics_of spells it for their records.
-PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p != 'mkl'), *LEGACY_PARTS])}"
+# The pinned choices of the earlier pins, as numerics_of spells them for their records: until
+# 2026-12-03 (MKL's Intel-only branch), and until 2026-12-05 (the keypoints through MKL's GEMV).
+# Both hold policy products bit for bit only on CPUs of the vendor that made them.
+PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p not in ('mkl', 'keypoints')), *LEGACY_PARTS])}"
+PINNED_GEMV_KEYPOINTS = f"{PINNED}:{','.join(p for p in PARTS if p != 'keypoints')}"
 
 
 @dataclass(frozen=True)
@@ -240,7 +249,8 @@ def resolved() -> dict:
     wp = configure_warp()
     numerics = chosen()
     env = {var: os.environ.get(var) for part in PARTS.values() for var in part}
-    out = {"name": numerics.name, "warp_cpu_compiler_flags": wp.config.cpu_compiler_flags,
+    # "parts" tells a record of today's full pin from one of the earlier pins, which had the same name.
+    out = {"name": numerics.name, "parts": list(numerics.parts), "warp_cpu_compiler_flags": wp.config.cpu_compiler_flags,
            "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
            "numpy_avx512": _numpy_avx512(), "opencv_avx512": "AVX512-SKX?" not in cv2.getCPUFeaturesLine()
            and "AVX512" in cv2.getCPUFeaturesLine(), "openblas_core": _openblas_core(),
@@ -276,9 +286,11 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
     receipt = record.get("receipt") or {}
     if receipt.get("numerics"):
         numerics = receipt["numerics"]
-        # The earlier pins were named as today's are; their MKL variables tell them apart.
+        # The earlier pins were named as today's are; their MKL variables and their lack of "parts" tell them apart.
         if numerics["name"] == PINNED and (numerics.get("environment") or {}).get("MKL_CBWR") == "AVX2":
             return PINNED_MKL_AVX2
+        if numerics["name"] == PINNED and "parts" not in numerics:
+            return PINNED_GEMV_KEYPOINTS
         return numerics["name"]
     if known and known.get("numerics"):
         return known["numerics"]
@@ -308,14 +320,16 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
     numerics = (record.get("receipt") or {}).get("numerics")
     if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
         return None
-    if numerics and numerics_of(record) == PINNED_MKL_AVX2:  # the earlier pins: all but MKL's vendor-dependent branch
+    earlier = numerics_of(record) if numerics else None
+    if earlier in (PINNED_MKL_AVX2, PINNED_GEMV_KEYPOINTS):  # the earlier pins: all but a vendor-dependent MKL path
         made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
         here = stack.get("cpu") or "unknown"
         same = _vendor(made) is not None and _vendor(made) == _vendor(here)
-        return (f"the records were made under the earlier pins ({PINNED_MKL_AVX2}), whose MKL branch depends on the "
-                f"CPU's vendor, on {made}; this machine is {here}: "
-                + ("of the same vendor, where they are expected to replay bit for bit (on AMD, MKL's branch is its "
-                   "AUTO one, measured on one AMD EPYC kind only)" if same else
+        what = ("whose MKL branch depends on the CPU's vendor" if earlier == PINNED_MKL_AVX2 else
+                "whose policy keypoints went through MKL's GEMV, which rounds otherwise on Intel and AMD CPUs")
+        return (f"the records were made under the earlier pins ({earlier}), {what}, on {made}; this machine is {here}: "
+                + ("of the same vendor, where they are expected to replay bit for bit (on AMD, MKL takes one path "
+                   "whatever MKL_CBWR says, measured on this workplace's AMD EPYC machines)" if same else
                    "a policy's float32 products may round otherwise here (the expert's use no MKL), and their "
                    "outcomes may differ"))
     made = (record.get("receipt") or {}).get("stack") or {}

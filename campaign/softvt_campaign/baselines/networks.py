@@ -19,6 +19,8 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from mani_skill_softvt.provenance.numerics import chosen as chosen_numerics
+
 
 def _groups(channels: int) -> int:
     return max(1, channels // 16)
@@ -54,7 +56,11 @@ class SpatialSoftmax(nn.Module):
         weights = torch.softmax(x.reshape(b, c, h * w), dim=-1)
         ys = torch.linspace(-1.0, 1.0, h, device=x.device).repeat_interleave(w)
         xs = torch.linspace(-1.0, 1.0, w, device=x.device).repeat(h)
-        return torch.cat([weights @ xs, weights @ ys], dim=-1)
+        if "keypoints" in chosen_numerics().parts:
+            # ATen's reduction sums in the same order on any CPU; a product with a vector is MKL's GEMV,
+            # whose AMD path ignores MKL's reproducibility mode (provenance/numerics.py, the keypoints part).
+            return torch.cat([(weights * xs).sum(-1), (weights * ys).sum(-1)], dim=-1)
+        return torch.cat([weights @ xs, weights @ ys], dim=-1)  # the earlier pins' products, for their records
 
 
 class ImageEncoder(nn.Module):
