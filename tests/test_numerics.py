@@ -18,6 +18,14 @@ from mani_skill_softvt.parallel import run_tasks
 from softvt_campaign import fingerprints as DP
 
 GOLDEN = json.loads((Path(__file__).parent / "golden" / "fingerprints.json").read_text())
+EPYC = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
+XEON = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
+
+
+def _pinned_record(mkl_cbwr: str, parts: list | None = None) -> dict:
+    """A record made on an AMD EPYC under pins named x86-64-v3 (today's carry their parts, earlier ones none)."""
+    numerics = {"name": "x86-64-v3", "pinned": True, "environment": {"MKL_CBWR": mkl_cbwr}}
+    return {"receipt": {"stack": EPYC, "numerics": numerics if parts is None else {**numerics, "parts": parts}}}
 
 
 def _pinned_variables(queue):
@@ -82,8 +90,7 @@ def test_a_bfloat16_training_releases_onednn_alone_and_says_so():
 
 
 def test_a_record_names_its_numerics_and_a_reproduction_is_told_about_the_machine():
-    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
-    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
+    epyc, xeon = EPYC, XEON
     old = {"receipt": {"stack": epyc}}  # made before the pins, on a machine that set OPENBLAS_CORETYPE
     assert N.numerics_of(old) == "x86-64-v3:openblas" and N.numerics_of({"receipt": {"stack": xeon}}) == "native"
     assert "of the kind that made them" in N.reproduction_note(old, {**epyc, "cpu-isa": "AVX2 avx512_bf16 avx512f avx2 fma "
@@ -103,12 +110,8 @@ def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earli
     assert N.parse(N.PINNED_MKL_AVX2).name == N.PINNED_MKL_AVX2 and "mkl" not in N.parse(N.PINNED_MKL_AVX2).parts
     with pytest.raises(ValueError, match="mkl and mkl-avx2"):
         N.parse("x86-64-v3:mkl,mkl-avx2")
-    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
-    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
-    earlier = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
-                                                       "environment": {"MKL_CBWR": "AVX2"}}}}
-    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True, "parts": list(N.PARTS),
-                                                     "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
+    epyc, xeon = EPYC, XEON
+    earlier, today = _pinned_record("AVX2"), _pinned_record("COMPATIBLE", list(N.PARTS))
     assert N.numerics_of(earlier) == N.PINNED_MKL_AVX2 and N.numerics_of(today) == N.PINNED
     assert "may differ" in N.reproduction_note(earlier, xeon)
     assert "same vendor" in N.reproduction_note(earlier, {**epyc, "cpu": "AMD EPYC 9R14"})
@@ -133,12 +136,8 @@ def test_a_policys_keypoints_take_no_blas_under_the_pins_and_earlier_records_rep
     exact = torch.cat([w @ grid_x.reshape(-1), w @ grid_y.reshape(-1)], -1)
     # float32 sums of 30 terms in [-1, 1] with weights summing to 1: within a few ulp of 1.
     assert torch.allclose(pinned.double(), exact, atol=30 * 2 ** -24, rtol=0)
-    epyc = {"cpu": "AMD EPYC", "cpu-isa": "AVX512 avx512_bf16 avx512f avx2 fma"}
-    xeon = {"cpu": "Intel(R) Xeon(R) Processor", "cpu-isa": "AVX512 amx_bf16 avx512_bf16 avx512f avx2 fma"}
-    earlier = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True,
-                                                       "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
-    today = {"receipt": {"stack": epyc, "numerics": {"name": "x86-64-v3", "pinned": True, "parts": list(N.PARTS),
-                                                     "environment": {"MKL_CBWR": "COMPATIBLE"}}}}
+    epyc, xeon = EPYC, XEON
+    earlier, today = _pinned_record("COMPATIBLE"), _pinned_record("COMPATIBLE", list(N.PARTS))
     assert N.numerics_of(earlier) == N.PINNED_GEMV_KEYPOINTS and N.numerics_of(today) == N.PINNED
     assert "GEMV" in N.reproduction_note(earlier, xeon) and "may differ" in N.reproduction_note(earlier, xeon)
     assert "same vendor" in N.reproduction_note(earlier, epyc) and N.reproduction_note(today, xeon) is None
