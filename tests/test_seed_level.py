@@ -148,3 +148,31 @@ def test_seed_findings_score_each_seed_on_the_registered_subset_and_pool_the_fam
     assert touch["comparison"]["difference"] == pytest.approx(np.mean(table[("object_soft", "vt-c-cpu")])
                                                                - np.mean(table[("object_soft", "vo-c-cpu")]))
     assert all(p["verdict"] == "unresolved" and p["why"] == "not run" for p in judged["4"])
+
+
+def test_seed_findings_judge_the_registered_spatial_claims_and_give_both_verdicts():
+    from softvt_campaign.studies import seed_findings as SF
+
+    def run(suite, p, rng):  # a complete ID run of one seed: 50 episodes a task
+        return [{"suite": suite, "task_id": t, "condition": "id", "seed": 50_000_000 + 1000 * t + i,
+                 "policy": "campaign-data/policies/x.pt", "success": bool(ok), "dsr_success": bool(ok)}
+                for t in range(10) for i, ok in enumerate(rng.random(50) < p)]
+
+    rng = np.random.default_rng(1)
+    rates = {"object_soft": 0.8, "object_rigid": 0.6, "spatial_soft": 0.3, "spatial_rigid": 0.5}
+    policies = {(suite, "vo-c-cpu"): {s: run(suite, p, rng) for s in range(3)} for suite, p in rates.items()}
+    judged = SF.claims(policies, {}, {})
+    table = SF.seed_table(policies, "tsr")
+    mean = {suite: np.mean(table[(suite, "vo-c-cpu")]) for suite in rates}
+    cost = next(p for p in judged["2"] if p["claim"].startswith("(Object-Rigid - Object-Soft)"))
+    # The interaction is a contrast of four recipes, its variance pooled over all four suites (8 df).
+    assert cost["axis"] == "spatial" and cost["seeds"] == [3, 3, 3, 3] and cost["comparison"]["df"] == 8
+    assert cost["comparison"]["difference"] == pytest.approx((mean["object_rigid"] - mean["object_soft"])
+                                                             - (mean["spatial_rigid"] - mean["spatial_soft"]))
+    twins = next(p for p in judged["2"] if p["claim"].startswith("Spatial-Rigid VO-C"))
+    assert twins["comparison"]["difference"] == pytest.approx(mean["spatial_rigid"] - mean["spatial_soft"])
+    assert twins["comparison"]["df"] == 4  # the two Spatial suites' seeds
+    # VT-C was never run on a Spatial suite: its parts are unresolved, never contradicted.
+    assert all(p["verdict"] == "unresolved" and p["why"] == "not run" for p in judged["ID"] + judged["4"])
+    _, data = SF.build(policies, {}, {})
+    assert "ID" not in data["verdicts"] and set(data["verdicts_object_parts"]) <= set(data["verdicts"])

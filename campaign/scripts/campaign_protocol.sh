@@ -12,7 +12,7 @@
 #    if already exported from the same policy, so its records stay reproducible);
 # 3. evaluates it on SUITE's ID protocol, PER_TASK episodes per task (default 50, all of them; the
 #    pre-registered design scores extra training seeds on the first 25), resumable, into campaign-data/results/;
-# 4. writes the report beside the paper's numbers (both Object suites, so a rigid-twin variant is
+# 4. writes the report beside the paper's numbers (all four suites, so a rigid-twin variant is
 #    paired with its soft one), the old-physics rows kept apart.
 # A policy exported in an earlier session, whose run this machine lacks, is scored as committed (step 3 on).
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
@@ -49,5 +49,5 @@ fi
 "$PY" -m mani_skill_softvt.evaluate --policy "$policy" --suite "$SUITE" --tasks all --episodes-per-task "${PER_TASK:-50}" \
   --workers "$WORKERS" --out campaign-data/results
 shopt -s nullglob
-"$PY" -m softvt_campaign.studies.results campaign-data/results/object_soft_id_*.jsonl \
-  campaign-data/results/object_rigid_id_*.jsonl --legacy campaign-data/results/old_physics/*.jsonl --out campaign-data/results
+"$PY" -m softvt_campaign.studies.results campaign-data/results/{object,spatial}_{soft,rigid}_id_*.jsonl \
+  --legacy campaign-data/results/old_physics/*.jsonl --out campaign-data/results

@@ -307,10 +307,10 @@ def machine_spread(results_dir: Path) -> dict:
     return out
 
 
-def load_ood(results_dir: Path) -> dict:
-    """VO-C's and VT-C's OOD runs with their ID twins; a problem with them is reported in Finding 4,
-    not raised (the other findings do not read them)."""
-    paths = {k: results_dir / f"object_soft_ood_{POLICIES[k]}.jsonl" for k in ("vo-c", "vt-c")}
+def load_ood(results_dir: Path, suite: str = "object_soft") -> dict:
+    """VO-C's and VT-C's OOD runs on a soft suite with their ID twins; a problem with them is
+    reported in Finding 4, not raised (the other findings do not read them)."""
+    paths = {k: results_dir / f"{suite}_ood_{POLICIES[k]}.jsonl" for k in ("vo-c", "vt-c")}
     paths = {k: p for k, p in paths.items() if p.is_file()}
     if not paths:
         return {}

@@ -2,11 +2,13 @@
 
     python -m softvt_campaign.studies.seed_findings campaign-data/results
 
-Reads every committed ID record of the Object suites (``<suite>_id_<policy>[-seed<N>].jsonl``; a
-file's records are one training seed of one recipe) and the OOD records of VO-C and VT-C, scores
-each seed on the registered subset (the first 25 ID episodes of each task), pools the seed-to-seed
-variance over each suite's family of recipes, and judges every registered Object claim with
-:mod:`mani_skill_softvt.evaluation.seed_level`. Writes ``seed_findings.md`` and ``.json`` beside
+Reads every committed ID record of the four suites (``<suite>_id_<policy>[-seed<N>].jsonl``; a
+file's records are one training seed of one recipe) and each soft suite's OOD records of VO-C and
+VT-C, scores each seed on the registered subset (the first 25 ID episodes of each task), pools the
+seed-to-seed variance over each suite's family of recipes (over the suites a claim spans when it
+crosses them), and judges every registered claim, Object and Spatial, with
+:mod:`mani_skill_softvt.evaluation.seed_level`; a claim whose runs are not committed yet is
+*unresolved (not run)*, so each finding's verdict is given on its Object parts and on all its parts. Writes ``seed_findings.md`` and ``.json`` beside
 the records: each recipe's mean over seeds with its seed-level interval and every seed's score,
 then each claim with B - A, its interval, the paper's effect and the verdict, and each finding's
 verdict from its parts. The claims are the registered table's; none is added or dropped here.
@@ -22,10 +24,13 @@ import numpy as np
 from mani_skill_softvt.evaluation.seed_level import (ALPHA, contrast, episode_key, finding_verdict, first_per_task, ood_interval,
                                      outcome_of, pooled_variance, size_note, verdict)
 from mani_skill_softvt.fileio import write_page
-from .findings import POLICIES, load
+from mani_skill_softvt.evaluation.records import read_records
+
+from .findings import POLICIES, by_policy, load, load_ood
 
 PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
 OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
+SPATIAL = ("spatial_soft", "spatial_rigid")
 
 
 def seed_table(policies: dict, outcome: str) -> dict[tuple[str, str], list[float]]:
@@ -60,8 +65,26 @@ def judge(text: str, groups: list, weights: list, fam, paper: float, kind: str) 
             "seeds": [len(g) for g in groups], "note": size_note(c, paper) if kind == "size" and v == "supported" else None}
 
 
-def claims(policies: dict, ood: dict) -> dict[str, list[dict]]:
-    """Every registered Object claim, judged."""
+def ood_claims(ood: dict | None, claims_: tuple, fam: dict) -> list[dict]:
+    """VT-C - VO-C on one soft suite's OOD runs (one run a recipe), clustered by initial state, with
+    the ID family's seed variance added."""
+    runs, names = (ood or {}).get("runs") or {}, (ood or {}).get("names") or {}
+    out = []
+    for text, outcome, paper in claims_:
+        if "vo-c" in names and "vt-c" in names:
+            c = ood_interval(runs[names["vo-c"]][0], runs[names["vt-c"]][0], outcome, fam[outcome])
+            out.append({"claim": text, "paper": paper, "kind": "sign", "verdict": verdict(c, paper, "sign"),
+                        "comparison": c.to_dict(), "seeds": [1, 1]})
+        else:
+            out.append({"claim": text, "paper": paper, "kind": "sign", "verdict": "unresolved", "why": "not run",
+                        "comparison": None})
+    return out
+
+
+def claims(policies: dict, ood: dict, spatial_ood: dict | None = None) -> dict[str, list[dict]]:
+    """Every registered claim, judged: the Object ones, then the Spatial ones (docs/preregistration.md,
+    registered before any Spatial record existed), each part marked with ``"axis"``. ``"ID"`` holds
+    the Spatial-Soft ID claims that belong to no finding."""
     t = {o: seed_table(policies, o) for o in OUTCOME_NAMES}
     soft, rigid = ("object_soft",), ("object_rigid",)
 
@@ -97,16 +120,54 @@ def claims(policies: dict, ood: dict) -> dict[str, list[dict]]:
             ("VT-B - VO-B, TSR", "tsr", "vo-b", "vt-b", 10.8, "sign")):
         out["3"].append(judge(text, [g(outcome, "object_soft", a), g(outcome, "object_soft", b)], [-1, 1],
                               fam[outcome], paper, kind))
-    runs, names = (ood or {}).get("runs") or {}, (ood or {}).get("names") or {}
-    for text, outcome, paper in (("VT-C - VO-C, pooled OOD TSR", "tsr", 2.0),
-                                 ("VT-C - VO-C, pooled OOD TSR - DSR", "past_tolerance", 3.6)):
-        if "vo-c" in names and "vt-c" in names:
-            c = ood_interval(runs[names["vo-c"]][0], runs[names["vt-c"]][0], outcome, fam[outcome])
-            out["4"].append({"claim": text, "paper": paper, "kind": "sign", "verdict": verdict(c, paper, "sign"),
-                             "comparison": c.to_dict(), "seeds": [1, 1]})
-        else:
-            out["4"].append({"claim": text, "paper": paper, "kind": "sign", "verdict": "unresolved", "why": "not run",
-                             "comparison": None})
+    out["4"] += ood_claims(ood, (("VT-C - VO-C, pooled OOD TSR", "tsr", 2.0),
+                                 ("VT-C - VO-C, pooled OOD TSR - DSR", "past_tolerance", 3.6)), fam)
+    for parts in out.values():
+        for p in parts:
+            p["axis"] = "object"
+    spatial = spatial_claims(t, spatial_ood)
+    for f, parts in spatial.items():
+        out.setdefault(f, []).extend(parts)
+    return out
+
+
+def spatial_claims(t: dict, ood: dict | None) -> dict[str, list[dict]]:
+    """The Spatial claims as registered. Families: Spatial-Soft's recipes; both Spatial suites for
+    the rigid-twin claims; all four suites for deformability's cost across the axes (a contrast of
+    four recipes). Finding 1 counts the Spatial-Soft runs: a rigid twin cannot leave its tolerance."""
+    ss, sr = ("spatial_soft",), ("spatial_rigid",)
+
+    def g(outcome, suite, key):
+        return t[outcome].get((suite, POLICIES[key]), [])
+
+    fam = {o: family(t[o], ss) for o in t}
+    spatial = {o: family(t[o], ss + sr) for o in t}
+    every = {o: family(t[o], ("object_soft", "object_rigid") + ss + sr) for o in t}
+    out: dict[str, list[dict]] = {"ID": [], "1": [], "2": [], "4": []}
+    for text, outcome, paper in (("VT-C - VO-C, Spatial-Soft TSR", "tsr", 17.4), ("VT-C - VO-C, Spatial-Soft DSR", "dsr", 11.6)):
+        out["ID"].append(judge(text, [g(outcome, "spatial_soft", "vo-c"), g(outcome, "spatial_soft", "vt-c")], [-1, 1],
+                               fam[outcome], paper, "sign"))
+    runs = {name: scores for (suite, name), scores in t["past_tolerance"].items() if suite == "spatial_soft"}
+    for name, scores in sorted(runs.items()):
+        out["1"].append({"claim": f"Spatial-Soft {name}: every seed has successes past tolerance", "paper": "> 0",
+                         "kind": "count", "verdict": "supported" if min(scores) > 0 else "contradicted",
+                         "comparison": None, "seeds": [len(scores)]})
+    if not runs:
+        out["1"].append({"claim": "every Spatial-Soft policy run has successes past tolerance", "paper": "> 0",
+                         "kind": "count", "verdict": "unresolved", "why": "not run", "comparison": None})
+    for key, paper, kind in (("vt-c", -22.0, "sign"), ("vo-c", -1.6, "none")):
+        out["2"].append(judge(f"Spatial-Rigid {key.upper()} - Spatial-Soft {key.upper()}, TSR",
+                              [g("tsr", "spatial_soft", key), g("tsr", "spatial_rigid", key)], [-1, 1],
+                              spatial["tsr"], paper, kind))
+    out["2"].append(judge("(Object-Rigid - Object-Soft) - (Spatial-Rigid - Spatial-Soft), VO-C TSR: deformability's "
+                          "cost changes sign between the axes",
+                          [g("tsr", s, "vo-c") for s in ("object_soft", "object_rigid", "spatial_soft", "spatial_rigid")],
+                          [-1, 1, 1, -1], every["tsr"], 4.2, "sign"))
+    out["4"] += ood_claims(ood, (("VT-C - VO-C, pooled OOD TSR (Spatial-Soft)", "tsr", 14.2),
+                                 ("VT-C - VO-C, pooled OOD TSR - DSR (Spatial-Soft)", "past_tolerance", 5.2)), fam)
+    for parts in out.values():
+        for p in parts:
+            p["axis"] = "spatial"
     return out
 
 
@@ -115,15 +176,24 @@ def misranking(parts: list[dict]) -> str:
     return "supported" if all(p["verdict"] == "supported" for p in parts) else "unresolved"
 
 
-def build(policies: dict, ood: dict) -> tuple[str, dict]:
-    judged = claims(policies, ood)
+def finding_verdicts(judged: dict[str, list[dict]], axes: tuple[str, ...]) -> dict[str, str]:
+    """Each finding's verdict from its parts on ``axes`` (the ``"ID"`` claims belong to no finding)."""
     verdicts = {}
     for f, parts in judged.items():
-        if f == "1":  # the misranking is one claim of two parts
-            rest = [p["verdict"] for p in parts if not p["claim"].startswith("VO-B - VO-C")]
-            verdicts[f] = finding_verdict(rest + [misranking([p for p in parts if p["claim"].startswith("VO-B - VO-C")])])
-        else:
-            verdicts[f] = finding_verdict([p["verdict"] for p in parts])
+        parts = [p for p in parts if p.get("axis", "object") in axes]
+        if f == "ID" or not parts:
+            continue
+        # Finding 1's misranking is one claim of two parts.
+        rest = [p["verdict"] for p in parts if not p["claim"].startswith("VO-B - VO-C")]
+        ranks = [p for p in parts if p["claim"].startswith("VO-B - VO-C")]
+        verdicts[f] = finding_verdict(rest + ([misranking(ranks)] if ranks else []))
+    return verdicts
+
+
+def build(policies: dict, ood: dict, spatial_ood: dict | None = None) -> tuple[str, dict]:
+    judged = claims(policies, ood, spatial_ood)
+    verdicts = finding_verdicts(judged, ("object", "spatial"))
+    object_verdicts = finding_verdicts(judged, ("object",))
     lines = ["# The paper's findings by the pre-registered seed-level rule", "",
              f"Generated by `python -m softvt_campaign.studies.seed_findings` (rule: docs/preregistration.md). "
              f"Each seed is scored on the first {PER_TASK} ID episodes of each task; B - A over training seeds, "
@@ -142,21 +212,26 @@ def build(policies: dict, ood: dict) -> tuple[str, dict]:
             ci = f"[{max(0.0, c.ci95[0]):.1f}, {min(100.0, c.ci95[1]):.1f}]" if c.ci95 else "[no interval]"
             cells.append(f"{np.mean(scores):.1f} {ci}; " + ", ".join(f"{x:.1f}" for x in scores))
         lines.append(f"| {key[0]} | {key[1]} | {len(tables['tsr'][key])} | " + " | ".join(cells) + " |")
-    lines += ["", "## Claims", "", "| finding | claim (B - A, points) | seeds | ours [95% CI] | df | paper | kind | verdict |",
-              "|---|---|---|---|---|---|---|---|"]
-    for f, parts in judged.items():
-        for p in parts:
-            c = p.get("comparison")
-            ours = "-" if c is None else (f"{c['difference']:+.1f} " + (f"[{c['ci95'][0]:+.1f}, {c['ci95'][1]:+.1f}]"
-                                                                         if c["ci95"] else "[no interval]"))
-            lines.append(f"| {f} | {p['claim']} | {p.get('seeds', '-')} | {ours} | {c['df'] if c else '-'} | {p['paper']} "
-                         f"| {p['kind']} | {p['verdict']}{', ' + p['note'] if p.get('note') else ''}"
-                         f"{' (' + p['why'] + ')' if p.get('why') else ''} |")
-    lines += ["", "## Findings", "", "| finding | verdict |", "|---|---|"]
-    lines += [f"| {f} | {v} |" for f, v in verdicts.items()]
+    for axis, title in (("object", "Claims: Object suites"), ("spatial", "Claims: Spatial suites (registered before any Spatial record)")):
+        lines += ["", f"## {title}", "", "| finding | claim (B - A, points) | seeds | ours [95% CI] | df | paper | kind | verdict |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for f, parts in judged.items():
+            for p in (p for p in parts if p.get("axis", "object") == axis):
+                c = p.get("comparison")
+                ours = "-" if c is None else (f"{c['difference']:+.1f} " + (f"[{c['ci95'][0]:+.1f}, {c['ci95'][1]:+.1f}]"
+                                                                             if c["ci95"] else "[no interval]"))
+                lines.append(f"| {f} | {p['claim']} | {p.get('seeds', '-')} | {ours} | {c['df'] if c else '-'} | {p['paper']} "
+                             f"| {p['kind']} | {p['verdict']}{', ' + p['note'] if p.get('note') else ''}"
+                             f"{' (' + p['why'] + ')' if p.get('why') else ''} |")
+    lines += ["", "## Findings", "", "| finding | on its Object parts | on all its registered parts | parts run |", "|---|---|---|---|"]
+    for f, v in verdicts.items():
+        parts = judged[f]
+        run = sum(1 for p in parts if p.get("why") != "not run")
+        lines.append(f"| {f} | {object_verdicts.get(f, '-')} | {v} | {run} of {len(parts)} |")
     lines += ["", "Finding 1's misranking needs both of its parts supported (VO-B above VO-C on TSR, below it on DSR).",
-              "OOD claims: one run a recipe, clustered by initial state, with the ID family's seed variance added."]
-    return "\n".join(lines) + "\n", {"claims": judged, "verdicts": verdicts}
+              "OOD claims: one run a recipe, clustered by initial state, with the ID family's seed variance added.",
+              "A part not run yet is unresolved, and an unresolved part never makes a finding contradicted."]
+    return "\n".join(lines) + "\n", {"claims": judged, "verdicts": verdicts, "verdicts_object_parts": object_verdicts}
 
 
 def main(argv=None) -> dict:
@@ -167,7 +242,8 @@ def main(argv=None) -> dict:
         found = load(args.results)  # the records the findings read, each verified
     except ValueError as e:
         ap.error(str(e))
-    text, data = build(found["policies"], found["ood"])
+    spatial = [r for suite in SPATIAL for p in sorted(args.results.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
+    text, data = build({**found["policies"], **by_policy(spatial)}, found["ood"], load_ood(args.results, "spatial_soft"))
     write_page(args.results, "seed_findings", text, data)
     print(text)
     return data
