@@ -323,10 +323,14 @@ def load_ood(results_dir: Path, suite: str = "object_soft") -> dict:
     return {"runs": runs, "twins_from": twins_from, "names": names}
 
 
+def id_records(results_dir: Path, suites: tuple[str, ...] = ("object_soft", "object_rigid")) -> list[dict]:
+    """Every ID record of ``suites`` in a results directory, each verified as it is read."""
+    return [r for suite in suites for p in sorted(results_dir.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
+
+
 def load(results_dir: Path) -> dict:
     """Everything the findings read from a results directory (see the module docstring)."""
-    records = [r for suite in ("object_soft", "object_rigid")
-               for p in sorted(results_dir.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
+    records = id_records(results_dir)
     if not records:
         raise ValueError(f"{results_dir}: no ID records (object_soft_id_*.jsonl); evaluate a policy first")
     binary = results_dir / "binary_close.json"

@@ -17,6 +17,7 @@ verdict from its parts. The claims are the registered table's; none is added or 
 from __future__ import annotations
 
 import argparse
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -24,9 +25,7 @@ import numpy as np
 from mani_skill_softvt.evaluation.seed_level import (ALPHA, contrast, episode_key, finding_verdict, first_per_task, ood_interval,
                                      outcome_of, pooled_variance, size_note, verdict)
 from mani_skill_softvt.fileio import write_page
-from mani_skill_softvt.evaluation.records import read_records
-
-from .findings import POLICIES, by_policy, load, load_ood
+from .findings import POLICIES, by_policy, id_records, load, load_ood
 
 PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
 OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
@@ -54,11 +53,18 @@ def family(table: dict, suites: tuple[str, ...]) -> tuple[float | None, int]:
     return pooled_variance(*[v for (suite, _), v in table.items() if suite in suites])
 
 
+def recipe(t: dict, outcome: str, suite: str, key: str) -> list[float]:
+    """The seed scores of ``key``'s registered policy on ``suite`` (empty: not run)."""
+    return t[outcome].get((suite, POLICIES[key]), [])
+
+
+def not_run(text: str, paper, kind: str) -> dict:
+    return {"claim": text, "paper": paper, "kind": kind, "verdict": "unresolved", "why": "not run", "comparison": None}
+
+
 def judge(text: str, groups: list, weights: list, fam, paper: float, kind: str) -> dict:
-    missing = [i for i, g in enumerate(groups) if not g]
-    if missing:
-        return {"claim": text, "paper": paper, "kind": kind, "verdict": "unresolved", "why": "not run",
-                "comparison": None}
+    if not all(len(g) for g in groups):
+        return not_run(text, paper, kind)
     c = contrast(groups, weights, fam)
     v = verdict(c, paper, kind)
     return {"claim": text, "paper": paper, "kind": kind, "verdict": v, "comparison": c.to_dict(),
@@ -76,8 +82,7 @@ def ood_claims(ood: dict | None, claims_: tuple, fam: dict) -> list[dict]:
             out.append({"claim": text, "paper": paper, "kind": "sign", "verdict": verdict(c, paper, "sign"),
                         "comparison": c.to_dict(), "seeds": [1, 1]})
         else:
-            out.append({"claim": text, "paper": paper, "kind": "sign", "verdict": "unresolved", "why": "not run",
-                        "comparison": None})
+            out.append(not_run(text, paper, "sign"))
     return out
 
 
@@ -87,9 +92,7 @@ def claims(policies: dict, ood: dict, spatial_ood: dict | None = None) -> dict[s
     the Spatial-Soft ID claims that belong to no finding."""
     t = {o: seed_table(policies, o) for o in OUTCOME_NAMES}
     soft, rigid = ("object_soft",), ("object_rigid",)
-
-    def g(outcome, suite, key):
-        return t[outcome].get((suite, POLICIES[key]), [])
+    g = partial(recipe, t)  # g(outcome, suite, variant)
 
     fam = {o: family(t[o], soft) for o in t}
     both = {o: family(t[o], soft + rigid) for o in t}
@@ -136,9 +139,7 @@ def spatial_claims(t: dict, ood: dict | None) -> dict[str, list[dict]]:
     the rigid-twin claims; all four suites for deformability's cost across the axes (a contrast of
     four recipes). Finding 1 counts the Spatial-Soft runs: a rigid twin cannot leave its tolerance."""
     ss, sr = ("spatial_soft",), ("spatial_rigid",)
-
-    def g(outcome, suite, key):
-        return t[outcome].get((suite, POLICIES[key]), [])
+    g = partial(recipe, t)  # g(outcome, suite, variant)
 
     fam = {o: family(t[o], ss) for o in t}
     spatial = {o: family(t[o], ss + sr) for o in t}
@@ -153,8 +154,7 @@ def spatial_claims(t: dict, ood: dict | None) -> dict[str, list[dict]]:
                          "kind": "count", "verdict": "supported" if min(scores) > 0 else "contradicted",
                          "comparison": None, "seeds": [len(scores)]})
     if not runs:
-        out["1"].append({"claim": "every Spatial-Soft policy run has successes past tolerance", "paper": "> 0",
-                         "kind": "count", "verdict": "unresolved", "why": "not run", "comparison": None})
+        out["1"].append(not_run("every Spatial-Soft policy run has successes past tolerance", "> 0", "count"))
     for key, paper, kind in (("vt-c", -22.0, "sign"), ("vo-c", -1.6, "none")):
         out["2"].append(judge(f"Spatial-Rigid {key.upper()} - Spatial-Soft {key.upper()}, TSR",
                               [g("tsr", "spatial_soft", key), g("tsr", "spatial_rigid", key)], [-1, 1],
@@ -242,8 +242,8 @@ def main(argv=None) -> dict:
         found = load(args.results)  # the records the findings read, each verified
     except ValueError as e:
         ap.error(str(e))
-    spatial = [r for suite in SPATIAL for p in sorted(args.results.glob(f"{suite}_id_*.jsonl")) for r in read_records(p)]
-    text, data = build({**found["policies"], **by_policy(spatial)}, found["ood"], load_ood(args.results, "spatial_soft"))
+    spatial = by_policy(id_records(args.results, SPATIAL))
+    text, data = build({**found["policies"], **spatial}, found["ood"], load_ood(args.results, "spatial_soft"))
     write_page(args.results, "seed_findings", text, data)
     print(text)
     return data
