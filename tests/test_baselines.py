@@ -826,6 +826,35 @@ def test_results_pair_a_soft_suite_with_its_rigid_twin_on_the_shared_seeds(tmp_p
     assert report.paper_id_cell(report.PAPER_ID["spatial_soft"]["vt-c"]) == "33.0 / 25.0 (Diffusion Policy)"
 
 
+def test_results_count_the_instance_each_spatial_row_carried_by_instructed_side(tmp_path):
+    # An instruction-blind policy that always takes the left instance: every right-instructed
+    # episode ends with the other instance on the target, and the side split shows it.
+    from mani_skill_softvt.evaluation.metrics import DISTURBED_M
+    from mani_skill_softvt.evaluation.records import record_hash
+    from softvt_campaign.studies import results as report
+
+    def rec(task, seed, side):
+        took_left = True
+        success = took_left == (side == "left")
+        moved = {"left": 0.2, "right": 2 * DISTURBED_M if seed == 0 else DISTURBED_M / 2}  # seed 0: both pushed
+        r = {"suite": "spatial_rigid", "task_id": task, "condition": "id", "seed": seed, "success": success,
+             "dsr_success": success, "r_max": 0.0, "termination": "success" if success else "timeout", "tau_o": 0.01,
+             "receipt": {"policy": "diffusion_policy[vo-c,cpu]"}, "policy": "vo.pt", "policy_sha256": "a" * 64,
+             "deformation_trace": [0.0, 0.0], "instructed_instance": side, "other_in_target": not success,
+             "instance_displacement": moved}
+        return {**r, "record_sha256": record_hash(r)}
+
+    rows = [rec(0, s, "left") for s in range(6)] + [rec(1, s, "right") for s in range(4)]
+    path = tmp_path / "r.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    report.main([str(path), "--out", str(tmp_path)])
+    text = (tmp_path / "results.md").read_text()
+    row = "| spatial_rigid/id/vo-c,cpu (vo) |"
+    assert f"{row} all | 10 | 60.0 [" in text and text.split(f"{row} all | 10 | ")[1].split("\n")[0].endswith("| 4 | 2 |")
+    assert f"{row} left | 6 | 100.0 [" in text and text.split(f"{row} left | 6 | ")[1].split("\n")[0].endswith("| 0 | 1 |")
+    assert f"{row} right | 4 | 0.0 [" in text and text.split(f"{row} right | 4 | ")[1].split("\n")[0].endswith("| 4 | 1 |")
+
+
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):
     from softvt_campaign.baselines import export as E
     from softvt_campaign.baselines.model import DiffusionPolicyModel

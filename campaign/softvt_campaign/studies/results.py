@@ -11,7 +11,8 @@ that left the calibrated tolerance) and its share of the successes, how episodes
 episodes of any ending squeezed the object past its tolerance (R_max > 1, a collapsed tet, or a
 blown-up FEM: harm that TSR - DSR cannot show when a policy never succeeds) and in how many a tet
 collapsed, and the paper's
-numbers for the same configuration. Then TSR / DSR per task side by side, and every two of
+numbers for the same configuration. On a Spatial suite, which instance each row carried, by the
+instructed side (the other instance on the target, both disturbed). Then TSR / DSR per task side by side, and every two of
 today's variants compared on the episodes both ran (the protocol's seeds are the same for every
 policy, so the comparison is paired: exact McNemar p-values and Newcombe's paired 95 % interval of the
 difference), and each variant on a soft suite
@@ -136,6 +137,28 @@ def per_task_lines(groups: dict) -> list[str]:
     return lines
 
 
+def instance_lines(groups: dict) -> list[str]:
+    """Per Spatial row of today's, all its episodes and then those of each instructed instance:
+    TSR, and how many ended with the other instance on the target or both disturbed. The ID
+    protocol fixes the side per task (right in tasks 1 and 6, left in the other eight), so a policy
+    that never reads the instruction (the paper's Diffusion Policy, ours) can tell the side only
+    from the object; its errors by side say whether it did (issue 61's question)."""
+    lines = []
+    for key in sorted(k for k in groups if not is_legacy(k)):
+        recs = [r for r in groups[key] if "instructed_instance" in r and r.get("instance_displacement")]
+        if not recs:
+            continue
+        if not lines:
+            lines = ["", "Which instance (Spatial suites; a success is the instructed one on the target):", "",
+                     "| row | instructed | episodes | TSR % [95% CI] | the other instance on the target "
+                     "| both instances disturbed |", "|---|---|---|---|---|---|"]
+        for side in ("all", *sorted({r["instructed_instance"] for r in recs})):
+            s = summarize([r for r in recs if side == "all" or r["instructed_instance"] == side])
+            lines.append(f"| {'/'.join(key)} | {side} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
+                         f"| {s['instances']['wrong_instance']} | {s['instances']['both_disturbed']} |")
+    return lines
+
+
 def comparisons(groups: dict) -> dict[str, dict]:
     """Every two of today's variants of one suite and protocol, paired on their common episodes,
     and each variant on a soft suite against the same variant (its own training) on the rigid
@@ -226,6 +249,7 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
         ends = [str(s["terminations"].get(k, 0)) for k in ENDINGS]
         lines.append(f"| {key} | " + " | ".join(ends) + f" | {s['tolerance_violations']} | {s['collapses']} "
                      f"| {s['r_max_median']:.3f} |")
+    lines += instance_lines(groups)
     lines += per_task_lines(groups)
     pairs = comparisons(groups)
     if pairs:
