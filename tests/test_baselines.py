@@ -834,8 +834,7 @@ def test_results_count_the_instance_each_spatial_row_carried_by_instructed_side(
     from softvt_campaign.studies import results as report
 
     def rec(task, seed, side):
-        took_left = True
-        success = took_left == (side == "left")
+        success = side == "left"  # it always carried the left one
         moved = {"left": 0.2, "right": 2 * DISTURBED_M if seed == 0 else DISTURBED_M / 2}  # seed 0: both pushed
         r = {"suite": "spatial_rigid", "task_id": task, "condition": "id", "seed": seed, "success": success,
              "dsr_success": success, "r_max": 0.0, "termination": "success" if success else "timeout", "tau_o": 0.01,
