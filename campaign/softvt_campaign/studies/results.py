@@ -31,7 +31,8 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from mani_skill_softvt.evaluation.metrics import group_summaries, paired_comparison, percent, percent_ci, summarize
+from mani_skill_softvt.evaluation.metrics import (group_summaries, instance_outcomes, paired_comparison, percent,
+                                                  percent_ci, summarize)
 from mani_skill_softvt.evaluation.protocols import episode_key, seed_key
 from mani_skill_softvt.evaluation.sidecar import machine, numerics, sidecar
 from mani_skill_softvt.evaluation.records import read_records
@@ -145,8 +146,8 @@ def instance_lines(groups: dict) -> list[str]:
     from the object; its errors by side say whether it did (issue 61's question)."""
     lines = []
     for key in sorted(k for k in groups if not is_legacy(k)):
-        recs = [r for r in groups[key] if "instructed_instance" in r and r.get("instance_displacement")]
-        if not recs:
+        recs = groups[key]
+        if instance_outcomes(recs) is None:  # not a Spatial row (or records from before the instances were kept)
             continue
         if not lines:
             lines = ["", "Which instance (Spatial suites; a success is the instructed one on the target):", "",
