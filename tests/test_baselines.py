@@ -852,6 +852,11 @@ def test_results_count_the_instance_each_spatial_row_carried_by_instructed_side(
     assert f"{row} all | 10 | 60.0 [" in text and text.split(f"{row} all | 10 | ")[1].split("\n")[0].endswith("| 4 | 2 |")
     assert f"{row} left | 6 | 100.0 [" in text and text.split(f"{row} left | 6 | ")[1].split("\n")[0].endswith("| 0 | 1 |")
     assert f"{row} right | 4 | 0.0 [" in text and text.split(f"{row} right | 4 | ")[1].split("\n")[0].endswith("| 4 | 1 |")
+    # results.json carries the same split, for a reader that wants numbers rather than markdown
+    sides = json.loads((tmp_path / "results.json").read_text())["rows"]["spatial_rigid/id/vo-c,cpu (vo)"]["by_instructed_instance"]
+    assert {k: (v["episodes"], v["wrong_instance"], v["both_disturbed"]) for k, v in sides.items()} == {
+        "all": (10, 4, 2), "left": (6, 0, 1), "right": (4, 4, 1)}
+    assert sides["left"]["tsr"] == 1.0 and sides["right"]["tsr"] == 0.0
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):

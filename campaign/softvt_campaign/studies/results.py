@@ -138,25 +138,39 @@ def per_task_lines(groups: dict) -> list[str]:
     return lines
 
 
+def by_instructed_instance(recs: list[dict]) -> dict[str, dict] | None:
+    """A Spatial row's episodes, all of them and then those of each instructed instance: the
+    episode count, TSR with its interval, and how many ended with the other instance on the
+    target or both disturbed. None for a row that is not a Spatial one (or whose records predate
+    the instances being kept). The ID protocol fixes the side per task (right in tasks 1 and 6,
+    left in the other eight), so a policy that never reads the instruction (the paper's Diffusion
+    Policy, ours) can tell the side only from the object; its errors by side say whether it did
+    (issue 61's question)."""
+    if instance_outcomes(recs) is None:
+        return None
+    out = {}
+    for side in ("all", *sorted({r["instructed_instance"] for r in recs})):
+        s = summarize([r for r in recs if side == "all" or r["instructed_instance"] == side])
+        out[side] = {"episodes": s["episodes"], "tsr": s["tsr"], "tsr_ci95": s["tsr_ci95"],
+                     "wrong_instance": s["instances"]["wrong_instance"], "both_disturbed": s["instances"]["both_disturbed"]}
+    return out
+
+
 def instance_lines(groups: dict) -> list[str]:
-    """Per Spatial row of today's, all its episodes and then those of each instructed instance:
-    TSR, and how many ended with the other instance on the target or both disturbed. The ID
-    protocol fixes the side per task (right in tasks 1 and 6, left in the other eight), so a policy
-    that never reads the instruction (the paper's Diffusion Policy, ours) can tell the side only
-    from the object; its errors by side say whether it did (issue 61's question)."""
+    """The "Which instance" table: each Spatial row of today's by instructed instance
+    (``by_instructed_instance``)."""
     lines = []
     for key in sorted(k for k in groups if not is_legacy(k)):
-        recs = groups[key]
-        if instance_outcomes(recs) is None:  # not a Spatial row (or records from before the instances were kept)
+        sides = by_instructed_instance(groups[key])
+        if sides is None:
             continue
         if not lines:
             lines = ["", "Which instance (Spatial suites; a success is the instructed one on the target):", "",
                      "| row | instructed | episodes | TSR % [95% CI] | the other instance on the target "
                      "| both instances disturbed |", "|---|---|---|---|---|---|"]
-        for side in ("all", *sorted({r["instructed_instance"] for r in recs})):
-            s = summarize([r for r in recs if side == "all" or r["instructed_instance"] == side])
+        for side, s in sides.items():
             lines.append(f"| {'/'.join(key)} | {side} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
-                         f"| {s['instances']['wrong_instance']} | {s['instances']['both_disturbed']} |")
+                         f"| {s['wrong_instance']} | {s['both_disturbed']} |")
     return lines
 
 
@@ -240,6 +254,8 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
         protocol = {"id": "ID", "side_swap": "side swap", "placement_x2": "placement x2"}.get(condition, f"OOD {condition}")
         paper = PAPER_ID.get(suite, {}).get(variant.split(",")[0].split(" ")[0]) if condition == "id" else None
         rows[f"{suite}/{condition}/{variant}"] = {**s, "paper": paper}
+        if (sides := by_instructed_instance(recs)) is not None:
+            rows[f"{suite}/{condition}/{variant}"]["by_instructed_instance"] = sides
         lines.append(f"| {suite} | {protocol} | {variant} | {s['episodes']} | {percent_ci(s['tsr'], s['tsr_ci95'])} "
                      f"| {percent_ci(s['dsr'], s['dsr_ci95'])} | {percent_ci(s['gap'], s['gap_ci95'])} "
                      f"| {percent_ci(s['gap_share_of_successes'], s['gap_share_ci95'])} "
