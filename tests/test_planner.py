@@ -1,5 +1,7 @@
 """The expert's mplib motion planner: collision-free, on target, within joint limits, clear errors."""
 
+import logging
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -9,7 +11,7 @@ from mani_skill_softvt.data.seeds import id_seed
 from mani_skill_softvt.expert.pick_place import PHASE_STEPS, expert_actions, plan_pick_place
 from mani_skill_softvt.tasks.robot import mid_height_grasp
 from mani_skill_softvt.expert.planner import (MPLIB_PLANS, MPLIB_UNAVAILABLE, MotionPlanner, PlanningError, box_obstacle,
-                                              held_object, plan_expert_path, scene_obstacles)
+                                              held_object, plan_expert_path, quiet_toppra, scene_obstacles)
 from mani_skill_softvt.physics.transforms import down_quat, quat_angle, quat_to_rotvec
 from mani_skill_softvt.tasks import constants as C
 
@@ -86,6 +88,34 @@ def test_actions_are_continuous_pd_ee_pose_targets(env):
     cart = np.array([a for _, a in expert_actions(env, plan_pick_place(env, 0.5, "cartesian"))])
     np.testing.assert_allclose(acts[-1, :3], cart[-1, :3], atol=3e-3)
     np.testing.assert_allclose(acts[-1, 3:6], cart[-1, 3:6], atol=0.05)
+
+
+def test_planning_leaves_no_toppra_handlers_behind(planned):
+    # mplib adds a stderr handler to the toppra logger before every time parametrisation; the
+    # fixture planned a whole pick-and-place, so without the cleanup there would be one per plan.
+    leaked = [h for h in logging.getLogger("toppra").handlers if isinstance(h, logging.StreamHandler)]
+    assert leaked == []
+
+
+def test_quiet_toppra_silences_mplibs_logging_pattern_and_restores_it(capfd):
+    import toppra
+
+    root = logging.getLogger("toppra")
+    before = list(root.handlers), root.level
+    warn = logging.getLogger("toppra.algorithm.algorithm").warning
+    with quiet_toppra():
+        toppra.setup_logging("WARNING")  # what mplib does before each parametrisation
+        warn("Fail to parametrize path.")
+    assert capfd.readouterr().err == ""
+    assert (list(root.handlers), root.level) == before
+    # The same pattern outside the context prints: the check above is not vacuous.
+    try:
+        toppra.setup_logging("WARNING")
+        warn("Fail to parametrize path.")
+        assert "Fail to parametrize path." in capfd.readouterr().err
+    finally:
+        root.handlers[:] = before[0]
+        root.setLevel(before[1])
 
 
 def test_a_pose_inside_the_table_raises_a_clear_error(env, planned):

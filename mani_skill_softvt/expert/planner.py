@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import os
 from dataclasses import dataclass
 
@@ -334,7 +335,7 @@ class MotionPlanner:
         return _resample(path, max(len(path) - 1, min_steps) + 1)[1:]
 
     def _screw(self, q0, goal, step: float):
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), quiet_toppra():
             try:
                 return self.mp.plan_screw(goal, q0.copy(), qpos_step=step, time_step=CONTROL_DT,
                                           use_attach=self._attached, wrt_world=False)
@@ -342,7 +343,7 @@ class MotionPlanner:
                 return {"status": f"screw plan failed ({e})"}
 
     def _rrt(self, q0, goal):
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), quiet_toppra():
             try:
                 return self.mp.plan_qpos_to_pose(goal, q0.copy(), time_step=CONTROL_DT, rrt_range=RRT_RANGE,
                                                  planning_time=RRT_TIME, use_attach=self._attached, wrt_world=False)
@@ -360,6 +361,33 @@ class MotionPlanner:
             return "; inverse kinematics from the start does not reach the pose (out of reach?)"
         hits = self.collisions(q[self.arm])
         return f"; the goal pose is in collision: {_fmt(hits)}" if hits else ""
+
+
+@contextlib.contextmanager
+def quiet_toppra():
+    """Run an mplib planning call without TOPP-RA's console output.
+
+    mplib calls ``toppra.setup_logging`` before every time parametrisation, which adds one more
+    stderr handler to the ``toppra`` logger each time: after a few hundred plans every TOPP-RA
+    warning prints hundreds of times between the progress bars. A failed parametrisation is
+    already one of :meth:`MotionPlanner.plan`'s attempts (mplib raises it, the planner records it
+    and says it in its :class:`PlanningError`), so the warning carries nothing. The ``toppra``
+    loggers' handlers and levels are restored on exit; other loggers are untouched.
+    """
+    root = logging.getLogger("toppra")
+    handlers, level = list(root.handlers), root.level
+    children = [lg for name, lg in logging.Logger.manager.loggerDict.items()
+                if name.startswith("toppra.") and isinstance(lg, logging.Logger)]
+    levels = [lg.level for lg in children]
+    for lg in children:
+        lg.setLevel(logging.ERROR)  # mplib resets the parent's level inside the call, not the children's
+    try:
+        yield
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
+        for lg, lv in zip(children, levels):
+            lg.setLevel(lv)
 
 
 def _fmt(hits) -> str:
