@@ -13,7 +13,8 @@
 #    episodes of each task into campaign-data/results/ (resumable: run the same command again).
 #    The training takes both cores (THREADS, default 2: torch's intra-op threads, which change the
 #    order of its float sums, not the recipe; 7.2 steps/s, 56 min for VO on an AMD EPYC, against about
-#    5.5 on one), and so does the scoring (two workers).
+#    5.5 on one), and so does the scoring (WORKERS, default 2). Two trainings side by side take
+#    THREADS=1 WORKERS=1 each.
 # Run again in a later session once the policy is committed, it skips the demos and the training and
 # scores what is left.
 # A rigid suite's VO training fits one session after its demos; a soft suite's
@@ -32,6 +33,8 @@ export SOFTVT_DEMOS_DIR=${SOFTVT_DEMOS_DIR:-/root/softvt-demos}
 export SOFTVT_RUNS_DIR=${SOFTVT_RUNS_DIR:-/root/softvt-runs}
 export PY=${PY:-.venv/bin/python}
 THREADS=${THREADS:-2}
+# Scoring workers (default 2, both cores); 1 where another training shares the machine.
+WORKERS=${WORKERS:-2}
 sub=$([ "$SUITE" = object_soft ] || echo "$SUITE/")
 if [ -f "campaign-data/policies/$sub$NAME.pt" ]; then
   # Trained and exported in an earlier session: only its scoring is left, which needs no demos.
@@ -42,5 +45,5 @@ else
 fi
 printf '\n[campaign session] %s  %s %s seed %s: train, export, %s ID episodes a task\n' "$(date -u +%H:%M:%S)" \
   "$SUITE" "$VARIANT" "$SEED" "$PER_TASK"
-SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED threads=$THREADS" bash campaign/scripts/campaign_protocol.sh "$VARIANT" noaug 2 100000 "$NAME"
+SUITE=$SUITE PER_TASK=$PER_TASK SET="steps=24000 seed=$SEED threads=$THREADS" bash campaign/scripts/campaign_protocol.sh "$VARIANT" noaug "$WORKERS" 100000 "$NAME"
 printf '\n[campaign session] %s  done\n' "$(date -u +%H:%M:%S)"
