@@ -34,6 +34,23 @@ SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 log() { printf '[setup] %s\n' "$*"; }
 
+# A full disk fails pip midway with "[Errno 28] No space left on device" and a half-built venv: check
+# first, on the venv's and pip's temporary filesystems. Measured (2026-12-05): the default venv 3.3 GB;
+# the LeRobot one over 7 GB (torch's CUDA build and its nvidia wheels) with about 3 GB of pip's
+# unpacked wheels in the temporary directory meanwhile. A CI run once failed in the LeRobot install
+# with ENOSPC beside a campaign's data caches.
+need_space() {
+  local gb=$1 dir avail
+  for dir in "$(dirname "$VENV")" "${TMPDIR:-/tmp}"; do
+    avail=$(df -Pk "$dir" | awk 'NR == 2 {print int($4 / 1048576)}')
+    if [ "$avail" -lt "$gb" ]; then
+      echo "setup: $avail GB free on $dir, the $STACK stack needs about $gb GB to install; free some space" \
+        "(e.g. a campaign's data caches in \$SOFTVT_RUNS_DIR, rebuilt on demand) and re-run" >&2
+      exit 1
+    fi
+  done
+}
+
 # ---------------------------------------------------------------- 1. apt
 codename=$(. /etc/os-release && echo "${VERSION_CODENAME:-bookworm}")
 mesa_major=$(dpkg-query -W -f='${Version}' mesa-vulkan-drivers 2>/dev/null | sed -E 's/^([0-9]+:)?([0-9]+).*/\2/' || true)
@@ -66,6 +83,7 @@ want=$(cat pyproject.toml scripts/setup.sh "$CONSTRAINTS" plugins/lerobot_env_so
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
   log "virtual environment $VENV up to date"
 elif [ "$STACK" = default ]; then
+  need_space 6
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   # CPU torch first: otherwise mani-skill's torch requirement pulls a CUDA build.
@@ -82,6 +100,7 @@ elif [ "$STACK" = default ]; then
   echo "$want" > "$stamp"
   log "installed the package and the campaign into $VENV"
 else
+  need_space 12
   # LeRobot 0.6.1 needs Python >= 3.12: the machine's python3.12, else pyenv's.
   # (A pyenv shim on PATH may name python3.12 and still refuse to run it: each candidate is tried.)
   py=""

@@ -298,7 +298,7 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
     return next((n for model, n in LEGACY_NUMERICS.items() if cpu.startswith(model)), NATIVE)
 
 
-def _vendor(cpu: str) -> str | None:
+def vendor(cpu: str) -> str | None:
     """The CPU's vendor as its model name says it (``Intel(R) Xeon(R) ...``, ``AMD EPYC ...``)."""
     text = cpu.lower()
     return "intel" if "intel" in text else "amd" if "amd" in text else None
@@ -315,16 +315,22 @@ def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:
 def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> str | None:
     """What a reproduction of ``record`` on a machine of ``stack`` (:func:`mani_skill_softvt.provenance.stack.software_stack`)
     should be told about its numerics: None when its numerics are pinned in full (they hold on any
-    x86-64 machine); else whether this machine is of the kind that made it (``known``: its file's
+    x86-64 machine; a trained policy's, on any of its CPU vendor); else whether this machine is of the kind that made it (``known``: its file's
     provenance sidecar entry, for a record that does not name its machine)."""
     numerics = (record.get("receipt") or {}).get("numerics")
     if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
+        made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu")
+        here = stack.get("cpu") or "unknown"
+        if record.get("policy_sha256") and made and vendor(made) != vendor(here):
+            return (f"the records were made on {made}; this machine is {here}: under the pins a trained policy's "
+                    "computations are the same bits on CPUs of one vendor, not yet across Intel and AMD (measured: "
+                    "the action chunk by 1e-6; docs/install.md, numerics), so their outcomes may differ here")
         return None
     earlier = numerics_of(record) if numerics else None
     if earlier in (PINNED_MKL_AVX2, PINNED_GEMV_KEYPOINTS):  # the earlier pins: all but a vendor-dependent MKL path
         made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
         here = stack.get("cpu") or "unknown"
-        same = _vendor(made) is not None and _vendor(made) == _vendor(here)
+        same = vendor(made) is not None and vendor(made) == vendor(here)
         what = ("whose MKL branch depends on the CPU's vendor" if earlier == PINNED_MKL_AVX2 else
                 "whose policy keypoints went through MKL's GEMV, which rounds otherwise on Intel and AMD CPUs")
         return (f"the records were made under the earlier pins ({earlier}), {what}, on {made}; this machine is {here}: "
