@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from mani_skill_softvt.fingerprints import CASES as LIBRARY_CASES, golden_key, policy_record
-from softvt_campaign.fingerprints import CASES as BASELINE_CASES
+from softvt_campaign.fingerprints import CASES as BASELINE_CASES, dp_inference_trace, first_difference
 from mani_skill_softvt.provenance.numerics import machine_kind, resolved
 from mani_skill_softvt.provenance.stack import software_stack
 
@@ -77,6 +77,27 @@ def write_golden(path: Path, prints: dict, remake: bool = False) -> list[str]:
     return differ
 
 
+def trace_main(out: Path | None, compare: Path | None) -> int:
+    """dp_inference call by call: written to ``out``, or compared with ``compare`` (its first difference)."""
+    cpu, flags = machine_kind(software_stack())
+    calls = dp_inference_trace()
+    if out:
+        out.write_text(json.dumps({"made_on": f"{cpu} ({' '.join(flags)})", "numerics": resolved()["name"],
+                                   "calls": calls}, indent=0) + "\n")
+        print(f"{len(calls)} calls written to {out}")
+    if compare:
+        before = json.loads(compare.read_text())
+        i = first_difference(before["calls"], calls)
+        if i is None:
+            print(f"the same {len(calls)} calls, bit for bit, as on {before['made_on']}")
+            return 0
+        print(f"first difference at call {i} of {len(calls)} (against {before['made_on']}):")
+        for j in range(max(0, i - 3), min(i + 3, len(calls), len(before["calls"]))):
+            print(f"  {j:5d}  here {calls[j]:32s} there {before['calls'][j]}{'   <-' if j == i else ''}")
+        return 1
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, help="write the fingerprints here (JSON)")
@@ -89,7 +110,12 @@ def main(argv=None) -> int:
                    "fingerprints.json) and add this machine to each matching case's passed_on; exit 1 on a difference")
     p.add_argument("--remake", action="store_true", help="with --golden: make the cases that differ here (the code "
                    "changed what they compute; the other machines they passed on no longer vouch for them)")
+    p.add_argument("--trace", type=Path, help="write dp_inference's call-by-call trace here (JSON) and stop")
+    p.add_argument("--trace-compare", type=Path, help="compare dp_inference's trace with one written before (on "
+                   "another CPU vendor, say): print the first call that differs; exit 1 on a difference")
     args = p.parse_args(argv)
+    if args.trace or args.trace_compare:
+        return trace_main(args.trace, args.trace_compare)
     runs = {**CASES, "record": lambda: policy_record(args.policy, args.suite)}
     prints = {"numerics": resolved()}
     for case in args.cases:

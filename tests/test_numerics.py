@@ -161,6 +161,19 @@ def test_a_trained_policys_records_and_goldens_are_per_cpu_vendor():
     assert N.reproduction_note({**policy, "policy_sha256": None}, XEON) is None  # the expert: any machine
 
 
+def test_two_traces_of_a_policys_inference_are_compared_at_their_first_differing_call():
+    """The tool that is to find the vendor difference (scripts/fingerprint.py --trace-compare): the
+    first call whose name or output differs, a shorter trace differing where it ends."""
+    from softvt_campaign.fingerprints import first_difference
+
+    a = ["conv2d:aa", "group_norm:bb", "mish:cc"]
+    assert first_difference(a, list(a)) is None
+    assert first_difference(a, ["conv2d:aa", "group_norm:bx", "mish:cc"]) == 1
+    assert first_difference(a, a[:2]) == 2
+    trace = json.loads((Path(__file__).parent / "golden" / "dp_inference_trace_intel.json").read_text())
+    assert trace["numerics"] == N.PINNED and len(trace["calls"]) > 3000
+
+
 def test_a_fingerprint_comparison_that_finds_nothing_to_compare_fails(tmp_path, monkeypatch, capsys):
     """scripts/fingerprint.py --compare once read the goldens' file (cases under "cases") as empty and
     printed "identical": a comparison without the cases it was asked for is a failure."""

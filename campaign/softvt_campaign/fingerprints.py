@@ -82,4 +82,55 @@ def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
             "episode": sha([weights, run.losses])}
 
 
+def dp_inference_trace(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt") -> list[str]:
+    """``dp_inference``'s computation call by call: ``"name:hash"`` for each torch function that
+    returns tensors, in order (about 3,800 calls). A policy's bits differ between Intel and AMD CPUs
+    for a cause not yet found (docs/install.md, numerics): a trace made on each vendor names the first
+    call whose output differs (``scripts/fingerprint.py --trace-compare``)."""
+    import hashlib
+
+    import torch
+    from torch.overrides import TorchFunctionMode
+
+    from .baselines.agent import load_policy_file
+    from .baselines.model import noise_scheduler
+
+    def digest(tensors) -> str:
+        h = hashlib.sha256()
+        for t in tensors:
+            x = t.detach().clone()
+            # numpy has no bfloat16: hash the 16-bit patterns
+            x = x.view(torch.int16) if x.dtype in (torch.bfloat16, torch.float16) else x
+            h.update(np.ascontiguousarray(x.numpy()).tobytes())
+        return h.hexdigest()[:12]
+
+    calls = []
+
+    class Trace(TorchFunctionMode):  # torch's own hook on every function call (the mode is off inside it)
+        def __torch_function__(self, func, types, args=(), kwargs=None):
+            out = func(*args, **(kwargs or {}))
+            tensors = [t for t in (out if isinstance(out, (tuple, list)) else [out]) if isinstance(t, torch.Tensor)]
+            if tensors:
+                calls.append(f"{getattr(func, '__name__', func)}:{digest(tensors)}")
+            return out
+
+    cfg, model, _ = load_policy_file(Path(policy))
+    model.eval()
+    obs = _synthetic_window(cfg, model, np.random.default_rng(0), 1)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with Trace():
+            model.sample(obs, torch.Generator().manual_seed(0), noise_scheduler(cfg, inference=True))
+    finally:
+        torch.set_num_threads(threads)
+    return calls
+
+
+def first_difference(a: list[str], b: list[str]) -> int | None:
+    """The index of the first call where two traces differ (in name or output), None if they agree."""
+    i = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
+    return None if i == len(a) == len(b) else i
+
+
 CASES = {"dp_inference": dp_inference, "dp_training": dp_training}
