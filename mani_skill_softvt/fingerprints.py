@@ -165,8 +165,13 @@ PER_VENDOR = ("dp_inference", "dp_training", "record")
 
 def golden_key(case: str, cpu: str | None) -> str:
     """The goldens' key of ``case`` on a machine whose CPU model name is ``cpu``: ``case``, or
-    ``case@intel`` / ``case@amd`` for the :data:`PER_VENDOR` cases."""
-    return f"{case}@{vendor(cpu or '')}" if case in PER_VENDOR else case
+    ``case@intel`` / ``case@amd`` for the :data:`PER_VENDOR` cases (ValueError where the model name
+    names neither vendor: no golden can vouch for it)."""
+    if case not in PER_VENDOR:
+        return case
+    if vendor(cpu or "") is None:
+        raise ValueError(f"{case}: its goldens are kept per CPU vendor, and the CPU {cpu!r} names neither Intel nor AMD")
+    return f"{case}@{vendor(cpu or '')}"
 
 
 CASES = {"expert_soft": lambda: expert_episode("SoftVTObjectSoft-v1"),

@@ -79,21 +79,29 @@ def write_golden(path: Path, prints: dict, remake: bool = False) -> list[str]:
 
 def trace_main(out: Path | None, compare: Path | None) -> int:
     """dp_inference call by call: written to ``out``, or compared with ``compare`` (its first difference)."""
-    cpu, flags = machine_kind(software_stack())
+    stack = software_stack()
+    cpu, flags = machine_kind(stack)
+    numerics, torch_version = resolved()["name"], stack.get("torch")
     calls = dp_inference_trace()
     if out:
-        out.write_text(json.dumps({"made_on": f"{cpu} ({' '.join(flags)})", "numerics": resolved()["name"],
-                                   "calls": calls}, indent=0) + "\n")
+        out.write_text(json.dumps({"made_on": f"{cpu} ({' '.join(flags)})", "numerics": numerics,
+                                   "torch": torch_version, "calls": calls}, indent=0) + "\n")
         print(f"{len(calls)} calls written to {out}")
     if compare:
         before = json.loads(compare.read_text())
+        for what, there, here in (("numerics", before.get("numerics"), numerics), ("torch", before.get("torch"), torch_version)):
+            if there != here:  # then a difference says nothing of the CPU
+                print(f"WARNING: {compare} was traced under {what} {there}, this run under {here}")
         i = first_difference(before["calls"], calls)
         if i is None:
             print(f"the same {len(calls)} calls, bit for bit, as on {before['made_on']}")
             return 0
-        print(f"first difference at call {i} of {len(calls)} (against {before['made_on']}):")
-        for j in range(max(0, i - 3), min(i + 3, len(calls), len(before["calls"]))):
-            print(f"  {j:5d}  here {calls[j]:32s} there {before['calls'][j]}{'   <-' if j == i else ''}")
+        print(f"first difference at call {i} (here {len(calls)} calls, there {len(before['calls'])}; "
+              f"against {before['made_on']}):")
+        for j in range(max(0, i - 3), i + 3):
+            a = calls[j] if j < len(calls) else "(ended)"
+            b = before["calls"][j] if j < len(before["calls"]) else "(ended)"
+            print(f"  {j:5d}  here {a:40s} there {b}{'   <-' if j == i else ''}")
         return 1
     return 0
 
@@ -134,7 +142,7 @@ def main(argv=None) -> int:
     if args.compare:
         before = read_fingerprints(args.compare)
         cpu = software_stack().get("cpu")  # a goldens' file keeps a trained policy's cases per CPU vendor
-        before = {**{c: before[golden_key(c, cpu)] for c in args.cases if golden_key(c, cpu) in before}, **before}
+        before = {**before, **{c: before[golden_key(c, cpu)] for c in args.cases if golden_key(c, cpu) in before}}
         missing = [c for c in args.cases if c not in before]
         if missing:  # a comparison that compares nothing must not read as a pass
             print(f"{args.compare} has no fingerprints of {', '.join(missing)}: nothing to compare them with")

@@ -35,20 +35,26 @@ SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 log() { printf '[setup] %s\n' "$*"; }
 
 # A full disk fails pip midway with "[Errno 28] No space left on device" and a half-built venv: check
-# first, on the venv's and pip's temporary filesystems. Measured (2026-12-05): the default venv 3.3 GB;
-# the LeRobot one over 7 GB (torch's CUDA build and its nvidia wheels) with about 3 GB of pip's
-# unpacked wheels in the temporary directory meanwhile. A CI run once failed in the LeRobot install
-# with ENOSPC beside a campaign's data caches.
+# first, before a new venv is made (an update of an existing one needs little). Measured (2026-12-05):
+# the default venv 3.3 GB; the LeRobot one 7.4 GB (torch's CUDA build and its nvidia wheels), with
+# about 3 GB of pip's unpacked wheels in the temporary directory meanwhile. A CI run once failed in
+# the LeRobot install with ENOSPC beside a campaign's data caches.
 need_space() {
-  local gb=$1 dir avail
-  for dir in "$(dirname "$VENV")" "${TMPDIR:-/tmp}"; do
-    avail=$(df -Pk "$dir" | awk 'NR == 2 {print int($4 / 1048576)}')
-    if [ "$avail" -lt "$gb" ]; then
-      echo "setup: $avail GB free on $dir, the $STACK stack needs about $gb GB to install; free some space" \
-        "(e.g. a campaign's data caches in \$SOFTVT_RUNS_DIR, rebuilt on demand) and re-run" >&2
-      exit 1
-    fi
-  done
+  local gb=$1 dir tmp=${TMPDIR:-/tmp} avail
+  [ -x "$VENV/bin/python" ] && return 0
+  dir=$(dirname "$VENV"); while [ ! -d "$dir" ]; do dir=$(dirname "$dir"); done
+  free_gb() { df -Pk "$1" | awk 'NR == 2 {print int($4 / 1048576)}'; }
+  avail=$(free_gb "$dir")
+  # pip's temporary files count against the venv's filesystem when they share it, else against their own
+  if [ -d "$tmp" ] && [ "$(stat -c %d "$tmp")" != "$(stat -c %d "$dir")" ] && [ "$(free_gb "$tmp")" -lt 3 ]; then
+    echo "setup: $(free_gb "$tmp") GB free in $tmp (TMPDIR), pip needs about 3 GB there; free some or point TMPDIR elsewhere, and re-run" >&2
+    exit 1
+  fi
+  if [ "$avail" -lt "$gb" ]; then
+    echo "setup: $avail GB free on $dir, the $STACK stack needs about $gb GB to install; free some space" \
+      "(e.g. a campaign's data caches in \$SOFTVT_RUNS_DIR, rebuilt on demand) and re-run" >&2
+    exit 1
+  fi
 }
 
 # ---------------------------------------------------------------- 1. apt

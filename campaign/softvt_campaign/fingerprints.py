@@ -111,7 +111,7 @@ def dp_inference_trace(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt"
             out = func(*args, **(kwargs or {}))
             tensors = [t for t in (out if isinstance(out, (tuple, list)) else [out]) if isinstance(t, torch.Tensor)]
             if tensors:
-                calls.append(f"{getattr(func, '__name__', func)}:{digest(tensors)}")
+                calls.append(f"{torch.overrides.resolve_name(func) or getattr(func, '__name__', func)}:{digest(tensors)}")
             return out
 
     cfg, model, _ = load_policy_file(Path(policy))
