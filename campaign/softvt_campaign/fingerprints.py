@@ -33,6 +33,14 @@ def _synthetic_window(cfg, model, rng: np.random.Generator, batch: int) -> dict:
 
 def dp_inference(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt") -> dict:
     """A committed policy's action chunk for a fixed observation window (one thread, as evaluated)."""
+    chunk = _sample(policy)
+    return {"chunk": chunk.numpy().round(6).tolist()[0][:2], "episode": sha(chunk)}
+
+
+def _sample(policy: str | Path, context=None):
+    """``policy``'s action chunk for the fixed window and noise seed, on one thread, inside ``context``."""
+    import contextlib
+
     import torch
 
     from .baselines.agent import load_policy_file
@@ -44,10 +52,10 @@ def dp_inference(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt") -> d
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        chunk = model.sample(obs, torch.Generator().manual_seed(0), noise_scheduler(cfg, inference=True))
+        with context or contextlib.nullcontext():
+            return model.sample(obs, torch.Generator().manual_seed(0), noise_scheduler(cfg, inference=True))
     finally:
         torch.set_num_threads(threads)
-    return {"chunk": chunk.numpy().round(6).tolist()[0][:2], "episode": sha(chunk)}
 
 
 def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
@@ -92,9 +100,6 @@ def dp_inference_trace(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt"
     import torch
     from torch.overrides import TorchFunctionMode
 
-    from .baselines.agent import load_policy_file
-    from .baselines.model import noise_scheduler
-
     def digest(tensors) -> str:
         h = hashlib.sha256()
         for t in tensors:
@@ -114,16 +119,7 @@ def dp_inference_trace(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt"
                 calls.append(f"{torch.overrides.resolve_name(func) or getattr(func, '__name__', func)}:{digest(tensors)}")
             return out
 
-    cfg, model, _ = load_policy_file(Path(policy))
-    model.eval()
-    obs = _synthetic_window(cfg, model, np.random.default_rng(0), 1)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        with Trace():
-            model.sample(obs, torch.Generator().manual_seed(0), noise_scheduler(cfg, inference=True))
-    finally:
-        torch.set_num_threads(threads)
+    _sample(policy, Trace())
     return calls
 
 
