@@ -122,8 +122,8 @@ def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earli
 
 def test_a_policys_keypoints_take_no_blas_under_the_pins_and_earlier_records_replay_through_mkls_gemv():
     """MKL's GEMV on AMD ignores MKL_CBWR, so the spatial softmax's expected coordinates are ATen's
-    reduction under the pins: the same keypoints up to rounding, and no MKL call in a policy's
-    inference. Records of the earlier pins (named x86-64-v3, without "parts") replay as made."""
+    reduction under the pins: the same keypoints up to rounding, and no MKL BLAS call in a
+    policy's inference. Records of the earlier pins (named x86-64-v3, without "parts") replay as made."""
     import torch
 
     from softvt_campaign.baselines.networks import SpatialSoftmax
