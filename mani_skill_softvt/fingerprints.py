@@ -3,8 +3,7 @@
 Two uses. A code move must not change one bit of what the code computes (``scripts/fingerprint.py
 --out before.json`` at the old commit, ``--compare`` at the new one); and under the pinned numerics
 (:mod:`mani_skill_softvt.provenance.numerics`) the same bits must come out on any x86-64 machine, which the
-default tests check against the committed goldens (``tests/golden/fingerprints.json``; a trained
-policy's cases per CPU vendor, :data:`PER_VENDOR`). The cases:
+default tests check against the committed goldens (``tests/golden/fingerprints.json``). The cases:
 
 - ``expert_soft`` / ``expert_rigid``: the scripted expert on Object-Soft / Object-Rigid task 3 in
   rgb+tactile at 64x64: ManiSkill's full state (robot, actors, FEM nodes, sleep state), every
@@ -28,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .provenance.numerics import vendor
 
 GOLDEN_SEED = 50_003_000  # an ID seed of task 3
 
@@ -154,24 +152,6 @@ def policy_record(policy: str = "campaign-data/policies/object_rigid/vt-c-cpu.pt
     receipt = {k: v for k, v in rec["receipt"].items() if k not in ("stack", "numerics", "package_version")}
     rec = {**{k: v for k, v in rec.items() if k not in (*NOT_REPRODUCED, "policy")}, "receipt": receipt}
     return {"steps": rec["steps"], "r_max": rec["r_max"], "termination": rec["termination"], "episode": sha(rec)}
-
-
-# A trained policy's computations (its inference, its training, its closed loop) are the same bits on
-# CPUs of one vendor under the pins, not yet across Intel and AMD: measured 2026-12-05, the action
-# chunk moves by 1e-6, cause not found (docs/install.md, numerics). Their goldens are kept per vendor
-# so that each vendor's bits are still checked; the physics, camera and touch goldens hold on both.
-PER_VENDOR = ("dp_inference", "dp_training", "record")
-
-
-def golden_key(case: str, cpu: str | None) -> str:
-    """The goldens' key of ``case`` on a machine whose CPU model name is ``cpu``: ``case``, or
-    ``case@intel`` / ``case@amd`` for the :data:`PER_VENDOR` cases (ValueError where the model name
-    names neither vendor: no golden can vouch for it)."""
-    if case not in PER_VENDOR:
-        return case
-    if vendor(cpu or "") is None:
-        raise ValueError(f"{case}: its goldens are kept per CPU vendor, and the CPU {cpu!r} names neither Intel nor AMD")
-    return f"{case}@{vendor(cpu or '')}"
 
 
 CASES = {"expert_soft": lambda: expert_episode("SoftVTObjectSoft-v1"),

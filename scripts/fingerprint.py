@@ -8,8 +8,7 @@ checking a code move bit for bit on one machine:
     .venv/bin/python scripts/fingerprint.py --golden tests/golden/fingerprints.json   # on a new machine kind
 
 Under the pinned numerics (the default; mani_skill_softvt/provenance/numerics.py) the fingerprints are the
-same on any x86-64 machine, a trained policy's on any of one CPU vendor (their goldens are kept per vendor,
-``case@intel``, ``case@amd``); ``tests/test_numerics.py`` checks them against the committed goldens.
+same on any x86-64 machine; ``tests/test_numerics.py`` checks them against the committed goldens.
 ``SOFTVT_NUMERICS=native`` fingerprints each library's own CPU dispatch, which holds on one machine
 kind only.
 """
@@ -21,7 +20,7 @@ import json
 import sys
 from pathlib import Path
 
-from mani_skill_softvt.fingerprints import CASES as LIBRARY_CASES, golden_key, policy_record
+from mani_skill_softvt.fingerprints import CASES as LIBRARY_CASES, policy_record
 from softvt_campaign.fingerprints import CASES as BASELINE_CASES, dp_inference_trace, first_difference
 from mani_skill_softvt.provenance.numerics import machine_kind, resolved
 from mani_skill_softvt.provenance.stack import software_stack
@@ -60,14 +59,13 @@ def write_golden(path: Path, prints: dict, remake: bool = False) -> list[str]:
         if c == "numerics":
             continue
         made = {k: v for k, v in p.items() if k != "per_step"}
-        key = golden_key(c, cpu)
-        before = old["cases"].get(key)
+        before = old["cases"].get(c)
         if before is not None and hashes_of(before) != hashes_of(made) and not remake:
-            differ.append(key)
+            differ.append(c)
         elif before is not None and hashes_of(before) == hashes_of(made):
-            cases[key] = {**before, "passed_on": sorted({*before.get("passed_on", []), here})}
+            cases[c] = {**before, "passed_on": sorted({*before.get("passed_on", []), here})}
         else:
-            cases[key] = {**made, "made_on": here, "passed_on": [here]}
+            cases[c] = {**made, "made_on": here, "passed_on": [here]}
     golden = {"numerics": numerics["name"], "warp_cpu_compiler_flags": numerics["warp_cpu_compiler_flags"],
               "cases": cases}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -141,8 +139,6 @@ def main(argv=None) -> int:
             return 1
     if args.compare:
         before = read_fingerprints(args.compare)
-        cpu = software_stack().get("cpu")  # a goldens' file keeps a trained policy's cases per CPU vendor
-        before = {**before, **{c: before[golden_key(c, cpu)] for c in args.cases if golden_key(c, cpu) in before}}
         missing = [c for c in args.cases if c not in before]
         if missing:  # a comparison that compares nothing must not read as a pass
             print(f"{args.compare} has no fingerprints of {', '.join(missing)}: nothing to compare them with")

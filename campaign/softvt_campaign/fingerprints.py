@@ -92,9 +92,10 @@ def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
 
 def dp_inference_trace(policy: str | Path = "campaign-data/policies/vt-c-cpu.pt") -> list[str]:
     """``dp_inference``'s computation call by call: ``"name:hash"`` for each torch function that
-    returns tensors, in order (about 3,800 calls). A policy's bits differ between Intel and AMD CPUs
-    for a cause not yet found (docs/install.md, numerics): a trace made on each vendor names the first
-    call whose output differs (``scripts/fingerprint.py --trace-compare``)."""
+    returns tensors, in order (about 3,800 calls). Two traces made on different machines (an Intel and
+    an AMD CPU, say) name the first call whose output differs (``scripts/fingerprint.py --trace-compare``):
+    under the pins before 2026-12-06 that was a policy's bits between the two vendors (docs/install.md,
+    numerics)."""
     import hashlib
 
     import torch

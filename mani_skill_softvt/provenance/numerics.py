@@ -69,6 +69,13 @@ PARTS: dict[str, dict[str, str]] = {
     # chunk by 1e-6). COMPATIBLE (SSE2 without rcpps/rsqrtps) is the branch MKL keeps the same on
     # Intel and compatible CPUs; a DP chunk measured no slower under it (0.40 s against 0.43 s).
     "mkl": {"MKL_CBWR": "COMPATIBLE", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
+    # MKL's vector maths (VML: torch's float32 exp, sin, cos, square root; a policy's timestep embedding
+    # and DDIM arithmetic) ignores MKL_CBWR's promise: under COMPATIBLE it runs its SSE4.2 kernels, whose
+    # square root starts from rsqrtps, an approximation whose bits each CPU vendor defines (Intel's and
+    # AMD's differ; the oneMKL reference, "Named Constants for CNR Control"). Its CPU type 1 is the SSE2
+    # kernels, which hold no rcpps/rsqrtps (nor any other approximation instruction): measured 2026-12-06,
+    # docs/install.md. MKL_VML_DEBUG_CPU_TYPE is VML's own override, read at its first call, on any vendor.
+    "vml": {"MKL_VML_DEBUG_CPU_TYPE": "1"},
     # The one float32 BLAS product of a policy's inference, the spatial softmax's expected keypoint
     # coordinates (softvt_campaign/baselines/networks.py), done as ATen's reduction, not MKL's GEMV:
     # MKL's GEMV path on AMD ignores MKL_CBWR (measured: AUTO, COMPATIBLE and AVX512 the same bits),
@@ -90,10 +97,13 @@ LEGACY_PARTS: dict[str, dict[str, str]] = {
 }
 _ALL_PARTS = {**PARTS, **LEGACY_PARTS}
 # The pinned choices of the earlier pins, as numerics_of spells them for their records: until
-# 2026-12-03 (MKL's Intel-only branch), and until 2026-12-05 (the keypoints through MKL's GEMV).
-# Both hold policy products bit for bit only on CPUs of the vendor that made them.
-PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p not in ('mkl', 'keypoints')), *LEGACY_PARTS])}"
-PINNED_GEMV_KEYPOINTS = f"{PINNED}:{','.join(p for p in PARTS if p != 'keypoints')}"
+# 2026-12-03 (MKL's Intel-only branch), until 2026-12-05 (the keypoints through MKL's GEMV) and until
+# 2026-12-06 (VML's per-vendor square root). All hold policy products bit for bit only on CPUs of the
+# vendor that made them.
+PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p not in ('mkl', 'keypoints', 'vml')), *LEGACY_PARTS])}"
+PINNED_GEMV_KEYPOINTS = f"{PINNED}:{','.join(p for p in PARTS if p not in ('keypoints', 'vml'))}"
+PINNED_VENDOR_VML = f"{PINNED}:{','.join(p for p in PARTS if p != 'vml')}"
+EARLIER_PINS = (PINNED_MKL_AVX2, PINNED_GEMV_KEYPOINTS, PINNED_VENDOR_VML)
 
 
 @dataclass(frozen=True)
@@ -236,11 +246,27 @@ def _openblas_core() -> str | None:
     return None
 
 
+def _vml_cpu_type() -> int | None:
+    """The kernel family MKL's vector maths runs in this process (1: SSE2, the ``vml`` pin), read from
+    the MKL that torch links (None: a torch without MKL). Asking fixes it, as VML's first call would:
+    from MKL_VML_DEBUG_CPU_TYPE where set, else from the CPU."""
+    import ctypes
+
+    import torch
+    try:
+        lib = ctypes.CDLL(os.path.join(os.path.dirname(torch.__file__), "lib", "libtorch_cpu.so"))
+        detect = lib.mkl_vml_serv_cpu_detect
+    except (OSError, AttributeError):
+        return None
+    detect.restype = ctypes.c_int
+    return detect()
+
+
 @lru_cache(maxsize=1)
 def resolved() -> dict:
     """What is in effect in this process, read back from the libraries where they tell (a record's
-    ``numerics``): the chosen name, Warp's flags, torch's vector capability, whether NumPy and OpenCV
-    dispatch to AVX-512, OpenBLAS's kernel family, and the pinning variables as set. ``pinned`` is
+    ``numerics``): the chosen name, Warp's flags, torch's vector capability, MKL's vector-maths kernels,
+    whether NumPy and OpenCV dispatch to AVX-512, OpenBLAS's kernel family, and the pinning variables as set. ``pinned`` is
     true when every part of the choice took effect (false, for example, when NumPy was imported
     before this package)."""
     import cv2
@@ -252,14 +278,14 @@ def resolved() -> dict:
     # "parts" tells a record of today's full pin from one of the earlier pins, which had the same name.
     out = {"name": numerics.name, "parts": list(numerics.parts), "warp_cpu_compiler_flags": wp.config.cpu_compiler_flags,
            "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
-           "numpy_avx512": _numpy_avx512(), "opencv_avx512": "AVX512-SKX?" not in cv2.getCPUFeaturesLine()
+           "mkl_vml_cpu_type": _vml_cpu_type(), "numpy_avx512": _numpy_avx512(), "opencv_avx512": "AVX512-SKX?" not in cv2.getCPUFeaturesLine()
            and "AVX512" in cv2.getCPUFeaturesLine(), "openblas_core": _openblas_core(),
            "environment": {k: v for k, v in sorted(env.items()) if v is not None},
            "loaded_before_pin": loaded_before_pin()}
     took = {"warp": out["warp_cpu_compiler_flags"] == WARP_PINNED_FLAGS,
             "aten": out["torch_cpu_capability"] in ("AVX2", "DEFAULT"),
             "numpy": not out["numpy_avx512"], "opencv": not out["opencv_avx512"],
-            "openblas": out["openblas_core"] in (None, "Haswell")}
+            "openblas": out["openblas_core"] in (None, "Haswell"), "vml": out["mkl_vml_cpu_type"] in (None, 1)}
     out["released"] = sorted(_RELEASED)
     # Pinned: every part chosen, and each took effect (a subset of the parts holds on one machine kind only).
     out["pinned"] = numerics.parts == tuple(PARTS) and all(took.values()) and not _RELEASED
@@ -291,6 +317,8 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
             return PINNED_MKL_AVX2
         if numerics["name"] == PINNED and "parts" not in numerics:
             return PINNED_GEMV_KEYPOINTS
+        if numerics["name"] == PINNED:  # the parts it names (before 2026-12-06: all but vml)
+            return parse(f"{PINNED}:{','.join(numerics['parts'])}").name
         return numerics["name"]
     if known and known.get("numerics"):
         return known["numerics"]
@@ -315,28 +343,25 @@ def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:
 def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> str | None:
     """What a reproduction of ``record`` on a machine of ``stack`` (:func:`mani_skill_softvt.provenance.stack.software_stack`)
     should be told about its numerics: None when its numerics are pinned in full (they hold on any
-    x86-64 machine; a trained policy's, on any of its CPU vendor); else whether this machine is of the kind that made it (``known``: its file's
-    provenance sidecar entry, for a record that does not name its machine)."""
+    x86-64 machine); else whether this machine is of the kind (or, for the earlier pins, of the CPU
+    vendor) that made it (``known``: its file's provenance sidecar entry, for a record that does not
+    name its machine)."""
     numerics = (record.get("receipt") or {}).get("numerics")
     if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
-        made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu")
-        here = stack.get("cpu") or "unknown"
-        if record.get("policy_sha256") and made and vendor(made) != vendor(here):
-            return (f"the records were made on {made}; this machine is {here}: under the pins a trained policy's "
-                    "computations are the same bits on CPUs of one vendor, not yet across Intel and AMD (measured: "
-                    "the action chunk by 1e-6; docs/install.md, numerics), so their outcomes may differ here")
         return None
     earlier = numerics_of(record) if numerics else None
-    if earlier in (PINNED_MKL_AVX2, PINNED_GEMV_KEYPOINTS):  # the earlier pins: all but a vendor-dependent MKL path
+    if earlier in EARLIER_PINS:  # the earlier pins: all but a vendor-dependent MKL path
         made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
         here = stack.get("cpu") or "unknown"
         same = vendor(made) is not None and vendor(made) == vendor(here)
-        what = ("whose MKL branch depends on the CPU's vendor" if earlier == PINNED_MKL_AVX2 else
-                "whose policy keypoints went through MKL's GEMV, which rounds otherwise on Intel and AMD CPUs")
+        what = {PINNED_MKL_AVX2: "whose MKL branch depends on the CPU's vendor",
+                PINNED_GEMV_KEYPOINTS: "whose policy keypoints went through MKL's GEMV, which rounds otherwise on "
+                                       "Intel and AMD CPUs",
+                PINNED_VENDOR_VML: "whose policy square roots came from MKL's vector maths through rsqrtps, an "
+                                   "approximation each CPU vendor rounds its own way"}[earlier]
         return (f"the records were made under the earlier pins ({earlier}), {what}, on {made}; this machine is {here}: "
-                + ("of the same vendor, where they are expected to replay bit for bit (on AMD, MKL takes one path "
-                   "whatever MKL_CBWR says, measured on this workplace's AMD EPYC machines)" if same else
-                   "a policy's float32 products may round otherwise here (the expert's use no MKL), and their "
+                + ("of the same vendor, where they are expected to replay bit for bit" if same else
+                   "a policy's products may round otherwise here (the expert's use no MKL), and their "
                    "outcomes may differ"))
     made = (record.get("receipt") or {}).get("stack") or {}
     if not made.get("cpu") and known and known.get("cpu"):
