@@ -35,6 +35,20 @@ def _pinned_variables(queue):
         got["torch_cpu_capability"] if got["pinned"] or got["name"] == "native" else "not pinned in full"
 
 
+def _vml_kernels_in_a_worker(queue):
+    """VML's kernel family in a worker process, before and after VML's first call, and after the
+    variable changes (VML keeps the choice of its first call: what resolved() reads is what ran)."""
+    import ctypes
+
+    import torch
+
+    detect = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so")).mkl_vml_serv_cpu_detect
+    torch.rand(8) ** 0.5
+    first = detect()
+    os.environ["MKL_VML_DEBUG_CPU_TYPE"] = "5" if first == 1 else "1"
+    return os.environ.get(N.NUMERICS_ENV), first, detect(), N.resolved()["mkl_vml_cpu_type"]
+
+
 def _released_onednn(queue):
     N.release("onednn")
     got = N.resolved()
@@ -114,8 +128,9 @@ def test_mkl_is_pinned_to_the_branch_it_keeps_alike_across_cpu_vendors_and_earli
     epyc, xeon = EPYC, XEON
     earlier, today = _pinned_record("AVX2"), _pinned_record("COMPATIBLE", list(N.PARTS))
     assert N.numerics_of(earlier) == N.PINNED_MKL_AVX2 and N.numerics_of(today) == N.PINNED
-    assert "may differ" in N.reproduction_note(earlier, xeon)
-    assert "same vendor" in N.reproduction_note(earlier, {**epyc, "cpu": "AMD EPYC 9R14"})
+    policy = {**earlier, "policy_sha256": "ab" * 32}  # a trained policy's record (the expert's hold anywhere)
+    assert "may differ" in N.reproduction_note(policy, xeon) and N.reproduction_note(earlier, xeon) is None
+    assert "same vendor" in N.reproduction_note(policy, {**epyc, "cpu": "AMD EPYC 9R14"})
     assert N.reproduction_note(today, xeon) is None
 
 
@@ -140,8 +155,9 @@ def test_a_policys_keypoints_take_no_blas_under_the_pins_and_earlier_records_rep
     epyc, xeon = EPYC, XEON
     earlier, today = _pinned_record("COMPATIBLE"), _pinned_record("COMPATIBLE", list(N.PARTS))
     assert N.numerics_of(earlier) == N.PINNED_GEMV_KEYPOINTS and N.numerics_of(today) == N.PINNED
-    assert "GEMV" in N.reproduction_note(earlier, xeon) and "may differ" in N.reproduction_note(earlier, xeon)
-    assert "same vendor" in N.reproduction_note(earlier, epyc) and N.reproduction_note(today, xeon) is None
+    policy = {**earlier, "policy_sha256": "ab" * 32}
+    assert "GEMV" in N.reproduction_note(policy, xeon) and "may differ" in N.reproduction_note(policy, xeon)
+    assert "same vendor" in N.reproduction_note(policy, epyc) and N.reproduction_note(today, xeon) is None
 
 
 # The maths functions whose float32 and float64 kernels torch hands to MKL's vector maths (ATen's vml.h)
@@ -152,7 +168,8 @@ APPROXIMATIONS = re.compile(r"\s(v?(rcp|rsqrt)(ps|ss)|f2xm1|fyl2x|fyl2xp1|fsin|f
 
 def _vml_kernels(kind: str) -> dict[str, str]:
     """{name: disassembly} of MKL's vector-maths kernels of ``kind`` (``E2``: SSE2, ``EX``: SSE4.2) for
-    :data:`VML_FUNCTIONS`, from the copy of MKL linked into torch (each symbol's code runs to the next one's)."""
+    :data:`VML_FUNCTIONS`, from the copy of MKL linked into torch (each symbol's code runs to the next
+    exported one's, its local helpers with it)."""
     import subprocess
 
     import torch
@@ -160,8 +177,9 @@ def _vml_kernels(kind: str) -> dict[str, str]:
     lib = Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"
     try:
         table = subprocess.run(["nm", "-D", "--defined-only", str(lib)], capture_output=True, text=True, check=True).stdout
+        subprocess.run(["objdump", "--version"], capture_output=True, check=True)
     except (OSError, subprocess.CalledProcessError) as e:
-        pytest.skip(f"nm could not read {lib} ({e}): binutils is needed to read MKL's kernels")
+        pytest.skip(f"binutils (nm, objdump) could not read {lib} ({e}): it is needed to read MKL's kernels")
     addresses = sorted({int(line.split()[0], 16) for line in table.splitlines() if line.split()[1:2] == ["T"]})
     wanted = {line.split()[2]: int(line.split()[0], 16) for line in table.splitlines()
               if re.fullmatch(rf"mkl_vml_kernel_[sd]({'|'.join(VML_FUNCTIONS)})_{kind}HAynn", line.split()[-1])}
@@ -179,10 +197,10 @@ def _vml_kernels(kind: str) -> dict[str, str]:
 def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under_the_pins():
     """MKL's vector maths (VML), which torch's float32 exp, sin, cos and square roots call, ignores
     MKL_CBWR=COMPATIBLE: it ran its SSE4.2 kernels, whose square root starts from rsqrtps, an
-    approximation whose bits each CPU vendor defines (Intel's and AMD's differ), so a policy's
-    action chunk moved by 1e-6 between the two (2026-12-05). The pins set VML's CPU type to its SSE2
-    kernels (``vml``), which hold no approximation instruction: by construction the same bits on any
-    x86-64 CPU. Records of the pins before (all parts but ``vml``) replay per vendor."""
+    approximation whose bits each CPU vendor defines (Intel's and AMD's differ): the likely cause of a
+    policy's action chunk moving by 1e-6 between the two (2026-12-05). The pins set VML's CPU type
+    to its SSE2 kernels (``vml``), which hold no approximation instruction and call nothing outside
+    themselves but VML's mode and error handlers."""
     import ctypes
 
     import torch
@@ -191,18 +209,42 @@ def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under
     sse2, sse42 = _vml_kernels("E2"), _vml_kernels("EX")
     assert len(sse2) == 2 * len(VML_FUNCTIONS)  # float32 and float64, each function's
     assert not {n: APPROXIMATIONS.findall(code) for n, code in sse2.items() if APPROXIMATIONS.search(code)}
+    assert re.search(r"\ssqrtps\s", sse2["mkl_vml_kernel_sSqrt_E2HAynn"])  # the maths itself is in the range
+    for name, code in sse2.items():
+        starts = [int(m, 16) for m in re.findall(r"^\s*([0-9a-f]+):", code, re.M)]
+        for target, label in re.findall(r"(?:call|j[a-z]+)\s+([0-9a-f]+) <([^>]+)>", code):
+            inside = starts[0] <= int(target, 16) <= starts[-1]
+            assert inside or re.fullmatch(r"mkl_vml_kernel_(GetMode|[sd]Error)@plt", label), (name, label)
     assert APPROXIMATIONS.search(sse42["mkl_vml_kernel_sSqrt_EXHAynn"])  # what the pins before ran
     torch.rand(8) ** 0.5  # VML chooses its kernels at its first call
     detect = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so")).mkl_vml_serv_cpu_detect
-    assert detect() == 1, "MKL's vector maths run other kernels than the SSE2 ones the pins choose"
+    assert detect() == 1 == N.resolved()["mkl_vml_cpu_type"], "MKL's vector maths run other kernels than the pins'"
+
+
+def test_records_of_the_pins_before_vml_replay_under_them_and_a_policys_per_vendor():
+    """A record of the full pins before 2026-12-06 names parts without ``vml``: it is read as those pins
+    with VML's own detection (``vml-detect``, the variable set empty, which MKL reads as no override,
+    so that a Ray worker can carry it), its worker runs VML's detected kernels, and a reproduction of a
+    policy's record on the other CPU vendor says its outcomes may differ (the expert's hold)."""
     earlier = _pinned_record("COMPATIBLE", [p for p in N.PARTS if p != "vml"])
-    today = _pinned_record("COMPATIBLE", list(N.PARTS))
-    policy = {**earlier, "policy_sha256": "ab" * 32}
+    policy, today = {**earlier, "policy_sha256": "ab" * 32}, _pinned_record("COMPATIBLE", list(N.PARTS))
     assert N.numerics_of(earlier) == N.PINNED_VENDOR_VML and "vml" not in N.parse(N.PINNED_VENDOR_VML).parts
-    assert N.parse(N.PINNED_VENDOR_VML).environment().get("MKL_VML_DEBUG_CPU_TYPE") is None
+    assert N.environment(N.PINNED_VENDOR_VML)["MKL_VML_DEBUG_CPU_TYPE"] == ""
+    assert all(v is not None for v in N.environment(N.PINNED_VENDOR_VML).values())  # a Ray worker can be given it
+    with pytest.raises(ValueError, match="vml and vml-detect"):
+        N.parse("x86-64-v3:vml,vml-detect")
     assert "rsqrtps" in N.reproduction_note(policy, XEON) and "may differ" in N.reproduction_note(policy, XEON)
     assert "same vendor" in N.reproduction_note(policy, {**EPYC, "cpu": "AMD EPYC 9R14"})
+    assert N.reproduction_note(earlier, XEON) is None  # the expert
     assert N.reproduction_note({**today, "policy_sha256": "ab" * 32}, XEON) is None
+    released = {"receipt": {**policy["receipt"], "numerics": {**policy["receipt"]["numerics"], "released": ["onednn"]}}}
+    assert "not pinned in full" in N.reproduction_note({**policy, **released}, {**EPYC, "cpu": "AMD EPYC 9R14"})
+    (pinned,) = [v for k, v in run_tasks(_vml_kernels_in_a_worker, [()], 1) if k == "result"]
+    (before,) = [v for k, v in run_tasks(_vml_kernels_in_a_worker, [()], 1, numerics=N.PINNED_VENDOR_VML)
+                 if k == "result"]
+    assert pinned == (N.PINNED, 1, 1, 1)
+    # VML's own detection (SSE4.2 or wider kernels on any x86-64-v3 CPU), kept past a later change of the variable.
+    assert before[0] == N.PINNED_VENDOR_VML and before[1] != 1 and before[1] == before[2] == before[3]
 
 
 def test_the_fingerprint_script_writes_and_compares_a_policys_golden(tmp_path, monkeypatch):
@@ -261,10 +303,9 @@ def test_a_fingerprint_comparison_that_finds_nothing_to_compare_fails(tmp_path, 
 
 
 def _same(case: str, got: dict, parts=("episode",)) -> None:
-    key = case
-    want = GOLDEN["cases"][key]
+    want = GOLDEN["cases"][case]
     moved = [p for p in parts if got[p] != want[p]]
-    assert not moved, (f"{key}: {', '.join(moved)} differ from the golden made on {want['made_on']} under "
+    assert not moved, (f"{case}: {', '.join(moved)} differ from the golden made on {want['made_on']} under "
                        f"{GOLDEN['numerics']} (passed on {'; '.join(want['passed_on'])}): some CPU dispatch is "
                        "not pinned on this machine, or the code changed what it computes (then make it again: "
                        "scripts/fingerprint.py --golden tests/golden/fingerprints.json --remake)")

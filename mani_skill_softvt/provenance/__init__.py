@@ -177,6 +177,9 @@ UPGRADES = (
     Upgrade("evaluation record", "receipt.numerics", "the sidecar's numerics, else the CPU's legacy numerics, else "
             "native; replayed so", "a provenance.json sidecar beside the records",
             "mani_skill_softvt.provenance.numerics:numerics_of"),
+    Upgrade("evaluation record", "receipt.numerics.parts: vml", "the pins before 2026-12-06, with VML's own kernel "
+            "detection (vml-detect); replayed so, a policy's on its CPU vendor", "none needed",
+            "mani_skill_softvt.provenance.numerics:numerics_of"),
     Upgrade("evaluation record", "receipt.stack (or keys of it)", "unrecorded: not a difference on reproduction",
             "a provenance.json sidecar beside the records", "mani_skill_softvt.provenance.stack:stack_differences"),
     # Demonstration files.

@@ -72,9 +72,11 @@ PARTS: dict[str, dict[str, str]] = {
     # MKL's vector maths (VML: torch's float32 exp, sin, cos, square root; a policy's timestep embedding
     # and DDIM arithmetic) ignores MKL_CBWR's promise: under COMPATIBLE it runs its SSE4.2 kernels, whose
     # square root starts from rsqrtps, an approximation whose bits each CPU vendor defines (Intel's and
-    # AMD's differ; the oneMKL reference, "Named Constants for CNR Control"). Its CPU type 1 is the SSE2
-    # kernels, which hold no rcpps/rsqrtps (nor any other approximation instruction): measured 2026-12-06,
-    # docs/install.md. MKL_VML_DEBUG_CPU_TYPE is VML's own override, read at its first call, on any vendor.
+    # AMD's differ; the oneMKL reference, "Named Constants for CNR Control"): the likely cause of a
+    # policy's Intel/AMD difference. Its CPU type 1 is the SSE2 kernels, which hold no rcpps/rsqrtps
+    # (nor any other approximation instruction): measured on an Intel Xeon 2026-12-06, docs/install.md.
+    # MKL_VML_DEBUG_CPU_TYPE is VML's own (undocumented) override, read at its first call; that AMD CPUs
+    # honour it too is not yet measured (resolved() reads back what VML runs).
     "vml": {"MKL_VML_DEBUG_CPU_TYPE": "1"},
     # The one float32 BLAS product of a policy's inference, the spatial softmax's expected keypoint
     # coordinates (softvt_campaign/baselines/networks.py), done as ATen's reduction, not MKL's GEMV:
@@ -94,6 +96,9 @@ PARTS: dict[str, dict[str, str]] = {
 # replay bit for bit only on CPUs of the vendor that made it (numerics_of names them so).
 LEGACY_PARTS: dict[str, dict[str, str]] = {
     "mkl-avx2": {"MKL_CBWR": "AVX2", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
+    # VML's own CPU detection, as every pin before 2026-12-06 left it: MKL reads a value that is not a
+    # digit as no override (measured), and a Ray worker's runtime_env can set a variable, not unset it.
+    "vml-detect": {"MKL_VML_DEBUG_CPU_TYPE": ""},
 }
 _ALL_PARTS = {**PARTS, **LEGACY_PARTS}
 # The pinned choices of the earlier pins, as numerics_of spells them for their records: until
@@ -101,8 +106,8 @@ _ALL_PARTS = {**PARTS, **LEGACY_PARTS}
 # 2026-12-06 (VML's per-vendor square root). All hold policy products bit for bit only on CPUs of the
 # vendor that made them.
 PINNED_MKL_AVX2 = f"{PINNED}:{','.join([*(p for p in PARTS if p not in ('mkl', 'keypoints', 'vml')), *LEGACY_PARTS])}"
-PINNED_GEMV_KEYPOINTS = f"{PINNED}:{','.join(p for p in PARTS if p not in ('keypoints', 'vml'))}"
-PINNED_VENDOR_VML = f"{PINNED}:{','.join(p for p in PARTS if p != 'vml')}"
+PINNED_GEMV_KEYPOINTS = f"{PINNED}:{','.join([*(p for p in PARTS if p not in ('keypoints', 'vml')), 'vml-detect'])}"
+PINNED_VENDOR_VML = f"{PINNED}:{','.join([*(p for p in PARTS if p != 'vml'), 'vml-detect'])}"
 EARLIER_PINS = (PINNED_MKL_AVX2, PINNED_GEMV_KEYPOINTS, PINNED_VENDOR_VML)
 
 
@@ -140,8 +145,9 @@ def parse(name: str) -> Numerics:
     if unknown:
         raise ValueError(f"{NUMERICS_ENV}={name!r}: unknown part(s) {', '.join(unknown)}; parts are {', '.join(PARTS)}"
                          f" (and, to replay records of earlier pins, {', '.join(LEGACY_PARTS)})")
-    if "mkl" in parts and "mkl-avx2" in parts:
-        raise ValueError(f"{NUMERICS_ENV}={name!r}: mkl and mkl-avx2 pin one library two ways; name one")
+    for today, earlier in (("mkl", "mkl-avx2"), ("vml", "vml-detect")):
+        if today in parts and earlier in parts:
+            raise ValueError(f"{NUMERICS_ENV}={name!r}: {today} and {earlier} pin one library two ways; name one")
     ordered = tuple(p for p in _ALL_PARTS if p in parts)
     # One spelling per choice (records and demo sets compare names): the parts in PARTS' order.
     return Numerics(PINNED if ordered == tuple(PARTS) else f"{PINNED}:{','.join(ordered)}", ordered)
@@ -174,10 +180,12 @@ def pin(environ=None) -> Numerics:
     if environ is os.environ and not _ORIGINAL:
         _LOADED_BEFORE.extend(m for m in ("numpy", "torch", "cv2") if m in sys.modules)
     if ORIGINAL_ENV in environ:
-        original = json.loads(environ[ORIGINAL_ENV])
+        # A variable an older version's parent did not know was unset as far as can be told (its
+        # value here may be that parent's pin).
+        original = {var: json.loads(environ[ORIGINAL_ENV]).get(var) for var in _pinning_variables()}
     else:
         original = {var: environ.get(var) for var in _pinning_variables()}
-        environ[ORIGINAL_ENV] = json.dumps(original)
+    environ[ORIGINAL_ENV] = json.dumps(original)
     if environ is os.environ:
         _ORIGINAL.update(original)
     # Every pinning variable as the choice has it: pinned, or as the shell had it (a process started by a
@@ -215,7 +223,8 @@ def environment(numerics: Numerics | str) -> dict[str, str | None]:
     its pinned value or (for a part not pinned) the value this process had before :func:`pin`
     (None: unset)."""
     numerics = parse(numerics) if isinstance(numerics, str) else numerics
-    out: dict[str, str | None] = {var: _ORIGINAL.get(var, os.environ.get(var)) for var in _pinning_variables()}
+    out: dict[str, str | None] = {var: _ORIGINAL.get(var) if _ORIGINAL else os.environ.get(var)
+                                  for var in _pinning_variables()}
     out.update(numerics.environment())
     return out
 
@@ -317,8 +326,8 @@ def numerics_of(record: dict, known: dict | None = None) -> str:
             return PINNED_MKL_AVX2
         if numerics["name"] == PINNED and "parts" not in numerics:
             return PINNED_GEMV_KEYPOINTS
-        if numerics["name"] == PINNED:  # the parts it names (before 2026-12-06: all but vml)
-            return parse(f"{PINNED}:{','.join(numerics['parts'])}").name
+        if numerics["name"] == PINNED and "vml" not in numerics["parts"]:  # the full pins before 2026-12-06
+            return parse(f"{PINNED}:{','.join([*numerics['parts'], 'vml-detect'])}").name
         return numerics["name"]
     if known and known.get("numerics"):
         return known["numerics"]
@@ -350,7 +359,11 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
     if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
         return None
     earlier = numerics_of(record) if numerics else None
-    if earlier in EARLIER_PINS:  # the earlier pins: all but a vendor-dependent MKL path
+    # The earlier pins, all but a vendor-dependent MKL path, where every part took effect (a record that
+    # completed an older file under them names them and is not "pinned", but released nothing).
+    if earlier in EARLIER_PINS and not numerics.get("released") and not numerics.get("loaded_before_pin"):
+        if not record.get("policy_sha256"):
+            return None  # the expert runs no MKL: its records hold across vendors (measured, docs/install.md)
         made = ((record.get("receipt") or {}).get("stack") or {}).get("cpu") or "a CPU it does not name"
         here = stack.get("cpu") or "unknown"
         same = vendor(made) is not None and vendor(made) == vendor(here)
@@ -361,8 +374,7 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
                                    "approximation each CPU vendor rounds its own way"}[earlier]
         return (f"the records were made under the earlier pins ({earlier}), {what}, on {made}; this machine is {here}: "
                 + ("of the same vendor, where they are expected to replay bit for bit" if same else
-                   "a policy's products may round otherwise here (the expert's use no MKL), and their "
-                   "outcomes may differ"))
+                   "the policy's products may round otherwise here, and their outcomes may differ"))
     made = (record.get("receipt") or {}).get("stack") or {}
     if not made.get("cpu") and known and known.get("cpu"):
         made = {"cpu": known["cpu"], "cpu-isa": known.get("cpu-isa")}
