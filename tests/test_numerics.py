@@ -38,15 +38,12 @@ def _pinned_variables(queue):
 def _vml_kernels_in_a_worker(queue):
     """VML's kernel family in a worker process, before and after VML's first call, and after the
     variable changes (VML keeps the choice of its first call: what resolved() reads is what ran)."""
-    import ctypes
-
     import torch
 
-    detect = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so")).mkl_vml_serv_cpu_detect
     torch.rand(8) ** 0.5
-    first = detect()
+    first = N.vml_cpu_type()
     os.environ["MKL_VML_DEBUG_CPU_TYPE"] = "5" if first == 1 else "1"
-    return os.environ.get(N.NUMERICS_ENV), first, detect(), N.resolved()["mkl_vml_cpu_type"]
+    return os.environ.get(N.NUMERICS_ENV), first, N.vml_cpu_type(), N.resolved()["mkl_vml_cpu_type"]
 
 
 def _released_onednn(queue):
@@ -201,8 +198,6 @@ def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under
     policy's action chunk moving by 1e-6 between the two (2026-12-05). The pins set VML's CPU type
     to its SSE2 kernels (``vml``), which hold no approximation instruction and call nothing outside
     themselves but VML's mode and error handlers."""
-    import ctypes
-
     import torch
 
     assert N.parse(N.PINNED).environment()["MKL_VML_DEBUG_CPU_TYPE"] == "1"
@@ -217,8 +212,7 @@ def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under
             assert inside or re.fullmatch(r"mkl_vml_kernel_(GetMode|[sd]Error)@plt", label), (name, label)
     assert APPROXIMATIONS.search(sse42["mkl_vml_kernel_sSqrt_EXHAynn"])  # what the pins before ran
     torch.rand(8) ** 0.5  # VML chooses its kernels at its first call
-    detect = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so")).mkl_vml_serv_cpu_detect
-    assert detect() == 1 == N.resolved()["mkl_vml_cpu_type"], "MKL's vector maths run other kernels than the pins'"
+    assert N.vml_cpu_type() == 1 == N.resolved()["mkl_vml_cpu_type"], "MKL's vector maths run other kernels than the pins'"
 
 
 def test_records_of_the_pins_before_vml_replay_under_them_and_a_policys_per_vendor():

@@ -255,7 +255,7 @@ def _openblas_core() -> str | None:
     return None
 
 
-def _vml_cpu_type() -> int | None:
+def vml_cpu_type() -> int | None:
     """The kernel family MKL's vector maths runs in this process (1: SSE2, the ``vml`` pin), read from
     the MKL that torch links (None: a torch without MKL). Asking fixes it, as VML's first call would:
     from MKL_VML_DEBUG_CPU_TYPE where set, else from the CPU."""
@@ -287,7 +287,7 @@ def resolved() -> dict:
     # "parts" tells a record of today's full pin from one of the earlier pins, which had the same name.
     out = {"name": numerics.name, "parts": list(numerics.parts), "warp_cpu_compiler_flags": wp.config.cpu_compiler_flags,
            "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
-           "mkl_vml_cpu_type": _vml_cpu_type(), "numpy_avx512": _numpy_avx512(), "opencv_avx512": "AVX512-SKX?" not in cv2.getCPUFeaturesLine()
+           "mkl_vml_cpu_type": vml_cpu_type(), "numpy_avx512": _numpy_avx512(), "opencv_avx512": "AVX512-SKX?" not in cv2.getCPUFeaturesLine()
            and "AVX512" in cv2.getCPUFeaturesLine(), "openblas_core": _openblas_core(),
            "environment": {k: v for k, v in sorted(env.items()) if v is not None},
            "loaded_before_pin": loaded_before_pin()}
