@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Findings campaign, step 1 (docs/baselines.md, "The findings campaign"): the committed VO-C and
-# VT-C on the Object-Soft OOD protocol, then their ID twins on this machine, then the report.
-#   bash campaign/scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
+# VT-C on a soft suite's OOD protocol, then their ID twins on this machine, then the report.
+#   [SUITE=object_soft] bash campaign/scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
+# SUITE=spatial_soft runs the Spatial-Soft policies (campaign-data/policies/spatial_soft/).
 # Every stage resumes where it stopped (records are appended as episodes finish): run the same
 # command again in the next session, from a checkout that holds the records so far.
 # 1. OOD: 9 held-out conditions x 10 tasks x 10 episodes a policy, into campaign-data/results/;
@@ -16,14 +17,20 @@ export PYTHONPATH="$PWD/campaign${PYTHONPATH:+:$PYTHONPATH}"
 WORKERS=${1:-1}
 read -r -a policies <<< "${2:-vo-c-cpu vt-c-cpu}"
 PY=${PY:-.venv/bin/python}
+SUITE=${SUITE:-object_soft}
+case "$SUITE" in
+  object_soft) policy_dir=campaign-data/policies ;;  # the Object policies predate the per-suite folders
+  spatial_soft) policy_dir=campaign-data/policies/spatial_soft ;;
+  *) echo "SUITE=$SUITE: the OOD protocol is defined on the soft suites only (object_soft, spatial_soft)" >&2; exit 2 ;;
+esac
 for p in "${policies[@]}"; do
-  "$PY" -m mani_skill_softvt.evaluate --policy "campaign-data/policies/$p.pt" --protocol ood --tasks all \
+  "$PY" -m mani_skill_softvt.evaluate --policy "$policy_dir/$p.pt" --suite "$SUITE" --protocol ood --tasks all \
     --episodes-per-task 10 --workers "$WORKERS" --out campaign-data/results
 done
 for p in "${policies[@]}"; do
-  "$PY" -m mani_skill_softvt.evaluate --policy "campaign-data/policies/$p.pt" --tasks all --episodes-per-task 10 \
+  "$PY" -m mani_skill_softvt.evaluate --policy "$policy_dir/$p.pt" --suite "$SUITE" --tasks all --episodes-per-task 10 \
     --workers "$WORKERS" --out campaign-data/results/twins
 done
 ood=()
-for p in "${policies[@]}"; do ood+=("campaign-data/results/object_soft_ood_$p.jsonl"); done
+for p in "${policies[@]}"; do ood+=("campaign-data/results/${SUITE}_ood_$p.jsonl"); done
 "$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins campaign-data/results/twins --out campaign-data/results
