@@ -125,6 +125,10 @@ def test_relative_difference_measures_rounding_not_other_kinds_of_change():
 
     assert relative_difference(0.5, 0.5 * (1 + 1e-15)) < 2e-15
     assert abs(relative_difference([1.0, 2.0], [1.0, 2.2]) - 0.2 / 2.2) < 1e-12
+    # A count that went from 7 to 0 (collapsed steps) differs wholly, not infinitely, in either order.
+    with np.errstate(all="raise"):
+        assert relative_difference(7, 0) == relative_difference(0, 7) == 1.0
+        assert relative_difference(0.0, 0.0) == 0.0 and relative_difference(-1.0, 1.0) == 2.0
     assert relative_difference(True, False) is None and relative_difference("a", "b") is None
     assert relative_difference([1.0], [1.0, 2.0]) is None and relative_difference(None, 1.0) is None
 

@@ -265,8 +265,9 @@ def record_differences(stored: dict, new: dict) -> list[str]:
 
 
 def relative_difference(a, b) -> float | None:
-    """The largest relative difference between two numbers or two equally long lists of numbers
-    (a field that differs only by rounding, on another machine, say); None for anything else."""
+    """The largest relative difference, against the larger magnitude, between two numbers or two
+    equally long lists of numbers (a field that differs only by rounding, on another machine, say):
+    between 0 and 2; None for anything else."""
     if isinstance(a, (bool, str, dict)) or isinstance(b, (bool, str, dict)) or a is None or b is None:
         return None
     try:
@@ -275,7 +276,10 @@ def relative_difference(a, b) -> float | None:
         return None
     if x.shape != y.shape or x.size == 0:
         return None
-    return float(np.max(np.abs(x - y) / np.maximum(np.abs(y), np.finfo(float).tiny)))
+    # Against the larger magnitude: symmetric, at most 2 (opposite signs), and a count that went from
+    # 0 to 7 reads as 1.0, not as an overflow to infinity (a division by the stored 0).
+    scale = np.maximum(np.maximum(np.abs(x), np.abs(y)), np.finfo(float).tiny)
+    return float(np.max(np.abs(x - y) / scale))
 
 
 def single_run(records: list[dict], path: Path) -> str | None:
