@@ -857,6 +857,17 @@ def test_results_count_the_instance_each_spatial_row_carried_by_instructed_side(
     assert {k: (v["episodes"], v["wrong_instance"], v["both_disturbed"]) for k, v in sides.items()} == {
         "all": (10, 4, 2), "left": (6, 0, 1), "right": (4, 4, 1)}
     assert sides["left"]["tsr"] == 1.0 and sides["right"]["tsr"] == 0.0
+    # Its side swap (the same seeds, the other side instructed) carries the left one again: it succeeds
+    # exactly where the ID carried the wrong instance, and the paired table says it ignored the words.
+    swap = [{**r, "condition": "side_swap", "instructed_instance": {"left": "right", "right": "left"}[r["instructed_instance"]],
+             "success": r["other_in_target"], "dsr_success": r["other_in_target"], "other_in_target": r["success"]}
+            for r in rows]
+    swap = [{**r, "record_sha256": record_hash({k: v for k, v in r.items() if k != "record_sha256"})} for r in swap]
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows + swap))
+    swaps = report.main([str(path), "--out", str(tmp_path)])["side_swaps"]["spatial_rigid/vo-c,cpu (vo)"]
+    assert (swaps["pairs"], swaps["followed"], swaps["same_instance"]) == (10, 0, 10)
+    assert swaps["success"]["difference"] == pytest.approx(-0.2)  # swap TSR 40 % against ID 60 %
+    assert "| spatial_rigid/vo-c,cpu (vo) | 10 | -20.0 [" in (tmp_path / "results.md").read_text()
 
 
 def test_export_halves_the_weights_keeps_the_normalisers_and_never_loses_the_previous_file(tmp_path):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mani_skill_softvt.evaluation.metrics import DISTURBED_M, instance_outcomes
+from mani_skill_softvt.evaluation.metrics import DISTURBED_M, instance_outcomes, side_swap_agreement
 from mani_skill_softvt.evaluation.protocols import episodes, protocol_of, reset_options
 from mani_skill_softvt.evaluation.run import RunConfig
 from mani_skill_softvt.evaluation.runner import evaluate
@@ -34,6 +34,21 @@ def test_the_protocol_reuses_the_id_seeds_on_the_spatial_suites_only():
         ["id", "side_swap", "placement_x2", "ood"]
     with pytest.raises(ValueError, match="swap_side"):
         make_env("object_rigid", 0, obs_mode="state_dict").reset(seed=0, options={"swap_side": True})
+
+
+def test_agreement_tells_a_policy_that_reads_the_instruction_from_one_that_does_not():
+    def rec(task, seed, side, success, other):
+        return {"task_id": task, "seed": seed, "instructed_instance": side, "success": success, "other_in_target": other}
+
+    ids = [rec(0, 1, "left", True, False), rec(0, 2, "left", False, True), rec(1, 1, "right", False, False)]
+    # A blind policy carries the same instance whatever it is told: the swap succeeds where the ID
+    # carried the other one, and carries the ID's target where the ID succeeded.
+    blind = [rec(0, 1, "right", False, True), rec(0, 2, "right", True, False), rec(1, 1, "left", False, False)]
+    assert side_swap_agreement(ids, blind) == {"pairs": 3, "unpaired": 0, "followed": 0, "same_instance": 2}
+    grounded = [rec(0, 1, "right", True, False), rec(0, 2, "right", True, False), rec(1, 9, "left", True, False)]
+    assert side_swap_agreement(ids, grounded) == {"pairs": 2, "unpaired": 2, "followed": 1, "same_instance": 1}
+    with pytest.raises(ValueError, match="same instance"):
+        side_swap_agreement(ids, ids)
 
 
 def test_the_swapped_episode_starts_from_the_id_state_and_the_expert_carries_the_other_instance(tmp_path):

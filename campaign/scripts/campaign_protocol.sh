@@ -50,4 +50,4 @@ fi
   --workers "$WORKERS" --out campaign-data/results
 shopt -s nullglob
 "$PY" -m softvt_campaign.studies.results campaign-data/results/{object,spatial}_{soft,rigid}_id_*.jsonl \
-  --legacy campaign-data/results/old_physics/*.jsonl --out campaign-data/results
+  campaign-data/results/side_swap/spatial_*_side_swap_*.jsonl --legacy campaign-data/results/old_physics/*.jsonl --out campaign-data/results

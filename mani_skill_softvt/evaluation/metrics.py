@@ -91,6 +91,33 @@ def instance_outcomes(records: list[dict]) -> dict | None:
             "both_disturbed": sum(all(d > DISTURBED_M for d in r["instance_displacement"].values()) for r in spatial)}
 
 
+def side_swap_agreement(id_records: list[dict], swap_records: list[dict]) -> dict:
+    """A policy's side-swap episodes against its ID episodes of the same task and seed (the same
+    scene, the other instance instructed): which instance it carried to the target in each.
+
+    ``followed``: it carried the instructed instance in both (it read the instruction);
+    ``same_instance``: it carried the same instance in both, the ID's instructed one or its other
+    (it ignored the instruction: a blind policy's swap success is its ID run's wrong instance);
+    ``pairs``: the pairs compared, ``unpaired``: episodes only one file holds."""
+    def by_seed(records):
+        out = {(int(r["task_id"]), int(r["seed"])): r for r in records if "instructed_instance" in r}
+        if len(out) < len(records):
+            raise ValueError("side_swap_agreement: Spatial records (naming instructed_instance), each episode once")
+        return out
+
+    ids, swaps = by_seed(id_records), by_seed(swap_records)
+    common = sorted(set(ids) & set(swaps))
+    for k in common:
+        if ids[k]["instructed_instance"] == swaps[k]["instructed_instance"]:
+            raise ValueError(f"task {k[0]} seed {k[1]}: the two episodes instruct the same instance; give the ID "
+                             "records first and the side-swap records second")
+    followed = sum(bool(ids[k]["success"]) and bool(swaps[k]["success"]) for k in common)
+    same = sum(bool(ids[k]["success"]) and bool(swaps[k]["other_in_target"])
+               or bool(ids[k]["other_in_target"]) and bool(swaps[k]["success"]) for k in common)
+    return {"pairs": len(common), "unpaired": len(ids) + len(swaps) - 2 * len(common),
+            "followed": followed, "same_instance": same}
+
+
 def summarize(records: list[dict]) -> dict:
     """TSR, DSR, their gap and the gap's share of successes, with Wilson intervals; how the
     episodes ended (``terminations``) and how many violated their tolerance.

@@ -32,7 +32,7 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from mani_skill_softvt.evaluation.metrics import (group_summaries, instance_outcomes, paired_comparison, percent,
-                                                  percent_ci, summarize)
+                                                  percent_ci, side_swap_agreement, summarize)
 from mani_skill_softvt.evaluation.protocols import episode_key, seed_key
 from mani_skill_softvt.evaluation.sidecar import machine, numerics, sidecar
 from mani_skill_softvt.evaluation.records import read_records
@@ -174,6 +174,36 @@ def instance_lines(groups: dict) -> list[str]:
     return lines
 
 
+def side_swaps(groups: dict) -> dict[str, dict]:
+    """Each of today's side-swap rows against the same variant's ID row, paired on task and seed
+    (the same scene, the other instance instructed): the TSR change, and which instance it carried
+    in each (:func:`side_swap_agreement`)."""
+    out = {}
+    for suite, condition, variant in sorted(k for k in groups if not is_legacy(k)):
+        if condition == "side_swap" and (ids := groups.get((suite, "id", variant))):
+            swap = groups[(suite, condition, variant)]
+            by_task_seed = lambda r: (int(r["task_id"]), int(r["seed"]))  # noqa: E731 (the two conditions pair)
+            out[f"{suite}/{variant}"] = {**side_swap_agreement(ids, swap),
+                                         "success": paired_comparison(swap, ids, "success", by_task_seed)}
+    return out
+
+
+def side_swap_lines(swaps: dict[str, dict]) -> list[str]:
+    if not swaps:
+        return []
+    lines = ["", "The side swap against ID, paired on task and seed (the same scene, the other instance instructed): "
+             "a policy that reads the instruction carries the instructed instance in both; one that does not "
+             "carries the same instance in both, so its swap successes are its ID run's wrong instances:", "",
+             "| row | pairs | swap TSR - ID TSR (points) [95% CI] | McNemar p | the instructed instance in both "
+             "| the same instance in both |", "|---|---|---|---|---|---|"]
+    for name, s in swaps.items():
+        c = s["success"]
+        lo, hi = c["difference_ci95"]
+        lines.append(f"| {name} | {s['pairs']} | {100 * c['difference']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] "
+                     f"| {c['p_value']:.2g} | {s['followed']} | {s['same_instance']} |")
+    return lines
+
+
 def comparisons(groups: dict) -> dict[str, dict]:
     """Every two of today's variants of one suite and protocol, paired on their common episodes,
     and each variant on a soft suite against the same variant (its own training) on the rigid
@@ -272,7 +302,9 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
     if pairs:
         lines += ["", "Paired on the same episodes (p: exact McNemar, two-sided, each comparison on its own: "
                   "no correction for making several):", "", *comparison_lines(pairs)]
-    return "\n".join(lines) + "\n", {"rows": rows, "comparisons": pairs}
+    swaps = side_swaps(groups)
+    lines += side_swap_lines(swaps)
+    return "\n".join(lines) + "\n", {"rows": rows, "comparisons": pairs, "side_swaps": swaps}
 
 
 def provenance_lines(files: list[tuple[str, list[dict], dict | None]]) -> list[str]:
