@@ -176,3 +176,25 @@ def test_seed_findings_judge_the_registered_spatial_claims_and_give_both_verdict
     assert all(p["verdict"] == "unresolved" and p["why"] == "not run" for p in judged["ID"] + judged["4"])
     _, data = SF.build(policies, {}, {})
     assert "ID" not in data["verdicts"] and set(data["verdicts_object_parts"]) <= set(data["verdicts"])
+    # The paper's tables in its layout: each cell the seed mean beside the paper's; VT-C not run.
+    text, _ = SF.build(policies, {}, {})
+    ts = {o: SF.seed_table(policies, o) for o in SF.OUTCOME_NAMES}
+    id_row = next(line for line in text.splitlines() if line.startswith("| VO-C | ") and "/ 37.4 |" in line)
+    assert id_row.startswith(f"| VO-C | {np.mean(ts['tsr'][('object_soft', 'vo-c-cpu')]):.1f} (3 seeds) / 37.4 |")
+    assert f"| {np.mean(ts['tsr'][('spatial_rigid', 'vo-c-cpu')]):.1f} (3 seeds) / 14.0 |" in text
+    assert "| VT-C | not run / 40.0 | not run / 30.4 | not run / 33.0 | not run / 25.0 |" in text
+    assert "| VO-C | not run / 29.2 (-8.2) |" in text  # no OOD run
+
+
+def test_pooled_ood_is_the_rate_over_the_nine_conditions_against_the_id_twins():
+    from softvt_campaign.studies import seed_findings as SF
+
+    def rec(ok, dsr):
+        return {"success": ok, "dsr_success": dsr}
+
+    ood = [rec(True, True)] * 3 + [rec(True, False)] + [rec(False, False)] * 6  # TSR 40, DSR 30
+    twins = [rec(True, True)] * 7 + [rec(False, False)] * 3  # 70 / 70
+    runs = {"names": {"vo-c": "v"}, "runs": {"v": (ood, twins)}}
+    assert SF.pooled_ood({**runs, "twins_from": {"v": twins}}, "vo-c") == pytest.approx((40.0, -30.0, 30.0, -40.0))
+    assert SF.pooled_ood(runs, "vo-c") == pytest.approx((40.0, None, 30.0, None))
+    assert SF.pooled_ood(runs, "vt-c") is None and SF.pooled_ood(None, "vo-c") is None

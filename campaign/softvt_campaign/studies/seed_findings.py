@@ -26,6 +26,8 @@ from mani_skill_softvt.evaluation.seed_level import (ALPHA, contrast, episode_ke
                                      outcome_of, pooled_variance, size_note, verdict)
 from mani_skill_softvt.fileio import write_page
 from .findings import POLICIES, by_policy, id_records, load, load_ood
+from .ood_results import PAPER_DP_POOLED_BY_SUITE
+from .results import PAPER_ID
 
 PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
 OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
@@ -190,6 +192,58 @@ def finding_verdicts(judged: dict[str, list[dict]], axes: tuple[str, ...]) -> di
     return verdicts
 
 
+def seed_mean(scores: list[float]) -> str:
+    """``81.8 (2 seeds)``; ``not run`` for none."""
+    return f"{np.mean(scores):.1f} ({len(scores)} seed{'s' * (len(scores) != 1)})" if scores else "not run"
+
+
+def pooled_ood(ood: dict | None, key: str) -> tuple[float, float | None, float, float | None] | None:
+    """One soft suite's OOD run of ``key`` pooled over its nine conditions: TSR and DSR (points), each
+    with its change against the run's ID twins (None before the twins have run); None if not run."""
+    names = (ood or {}).get("names") or {}
+    if key not in names:
+        return None
+    recs, twins = ood["runs"][names[key]][0], (ood.get("twins_from") or {}).get(names[key])
+    rate = lambda rs, o: 100.0 * float(np.mean([bool(r[o]) for r in rs]))  # noqa: E731
+    tsr, dsr = rate(recs, "success"), rate(recs, "dsr_success")
+    return (tsr, tsr - rate(twins, "success") if twins else None, dsr, dsr - rate(twins, "dsr_success") if twins else None)
+
+
+def paper_table_lines(tables: dict, ood_by_suite: dict[str, dict | None]) -> list[str]:
+    """The paper's Diffusion Policy tables in its layout (ID, rigid twins, OOD pooled), ours beside
+    each of its cells: the mean over training seeds on the registered subset (ID), one run (OOD)."""
+    def cell(ours: str, paper) -> str:
+        return f"{ours} / {paper if paper is not None else '-'}"
+
+    lines = ["", "## The paper's tables: ours / the paper's Diffusion Policy", "",
+             f"ID, mean over training seeds on the first {PER_TASK} ID episodes of each task (each seed on all "
+             "500 and the intervals: results.md and the recipe table above):", "",
+             "| input | Object-Soft TSR | Object-Soft DSR | Spatial-Soft TSR | Spatial-Soft DSR |", "|---|---|---|---|---|"]
+    for key in ("vo-c", "vt-c"):
+        cells = [cell(seed_mean(recipe(tables, o, suite, key)), (PAPER_ID[suite][key][1 + (o == "dsr")]))
+                 for suite in ("object_soft", "spatial_soft") for o in ("tsr", "dsr")]
+        lines.append(f"| {key.upper()} | " + " | ".join(cells) + " |")
+    lines += ["", "Rigid twins (TSR; on a twin DSR is TSR):", "",
+              "| input | Object Rigid | Object Soft | Spatial Rigid | Spatial Soft |", "|---|---|---|---|---|"]
+    for key in ("vo-c", "vt-c"):
+        cells = [cell(seed_mean(recipe(tables, "tsr", suite, key)), PAPER_ID[suite][key][1])
+                 for suite in ("object_rigid", "object_soft", "spatial_rigid", "spatial_soft")]
+        lines.append(f"| {key.upper()} | " + " | ".join(cells) + " |")
+    lines += ["", "OOD pooled over the nine conditions (one run a recipe; the change against its ID twins, the "
+              "paper's against its full ID entry):", "",
+              "| input | Object-Soft TSR (change) | Object-Soft DSR (change) | Spatial-Soft TSR (change) "
+              "| Spatial-Soft DSR (change) |", "|---|---|---|---|---|"]
+    for key in ("vo-c", "vt-c"):
+        cells = []
+        for suite in ("object_soft", "spatial_soft"):
+            ours, paper = pooled_ood(ood_by_suite.get(suite), key), PAPER_DP_POOLED_BY_SUITE[suite][key]
+            for i in (0, 2):
+                mine = "not run" if ours is None else f"{ours[i]:.1f} ({'-' if ours[i + 1] is None else f'{ours[i + 1]:+.1f}'})"
+                cells.append(cell(mine, f"{paper[i]} ({paper[i + 1]:+})"))
+        lines.append(f"| {key.upper()} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def build(policies: dict, ood: dict, spatial_ood: dict | None = None) -> tuple[str, dict]:
     judged = claims(policies, ood, spatial_ood)
     verdicts = finding_verdicts(judged, ("object", "spatial"))
@@ -223,6 +277,7 @@ def build(policies: dict, ood: dict, spatial_ood: dict | None = None) -> tuple[s
                 lines.append(f"| {f} | {p['claim']} | {p.get('seeds', '-')} | {ours} | {c['df'] if c else '-'} | {p['paper']} "
                              f"| {p['kind']} | {p['verdict']}{', ' + p['note'] if p.get('note') else ''}"
                              f"{' (' + p['why'] + ')' if p.get('why') else ''} |")
+    lines += paper_table_lines(tables, {"object_soft": ood, "spatial_soft": spatial_ood})
     lines += ["", "## Findings", "", "| finding | on its Object parts | on all its registered parts | parts run |", "|---|---|---|---|"]
     for f, v in verdicts.items():
         parts = judged[f]
