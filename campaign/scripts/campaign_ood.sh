@@ -31,6 +31,7 @@ for p in "${policies[@]}"; do
   "$PY" -m mani_skill_softvt.evaluate --policy "$policy_dir/$p.pt" --suite "$SUITE" --tasks all --episodes-per-task 10 \
     --workers "$WORKERS" --out campaign-data/results/twins
 done
-ood=()
-for p in "${policies[@]}"; do ood+=("campaign-data/results/${SUITE}_ood_$p.jsonl"); done
+# One report (ood.md) over every soft suite's OOD run committed: a Spatial run must not replace the Object page.
+shopt -s nullglob
+ood=(campaign-data/results/{object,spatial}_soft_ood_*.jsonl)
 "$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins campaign-data/results/twins --out campaign-data/results
