@@ -189,12 +189,19 @@ def test_seed_findings_judge_the_registered_spatial_claims_and_give_both_verdict
 def test_pooled_ood_is_the_rate_over_the_nine_conditions_against_the_id_twins():
     from softvt_campaign.studies import seed_findings as SF
 
-    def rec(ok, dsr):
-        return {"success": ok, "dsr_success": dsr}
+    def rec(task, seed, condition, ok, dsr):
+        return {"suite": "spatial_soft", "task_id": task, "seed": seed, "condition": condition,
+                "success": ok, "dsr_success": dsr}
 
-    ood = [rec(True, True)] * 3 + [rec(True, False)] + [rec(False, False)] * 6  # TSR 40, DSR 30
-    twins = [rec(True, True)] * 7 + [rec(False, False)] * 3  # 70 / 70
+    # Two initial states, each under nine conditions; the twin of state 0 succeeds, of state 1 fails.
+    conds = sorted(SF.OOD_CONDITIONS)
+    ood = [rec(0, 0, c, i < 6, i < 3) for i, c in enumerate(conds)] + [rec(0, 1, c, i < 3, False) for i, c in enumerate(conds)]
+    twins = [rec(0, 0, "id", True, True), rec(0, 1, "id", False, False)]
     runs = {"names": {"vo-c": "v"}, "runs": {"v": (ood, twins)}}
-    assert SF.pooled_ood({**runs, "twins_from": {"v": twins}}, "vo-c") == pytest.approx((40.0, -30.0, 30.0, -40.0))
-    assert SF.pooled_ood(runs, "vo-c") == pytest.approx((40.0, None, 30.0, None))
-    assert SF.pooled_ood(runs, "vt-c") is None and SF.pooled_ood(None, "vo-c") is None
+    pooled = SF.pooled_ood({**runs, "twins_from": {"v": twins}}, "vo-c")
+    # TSR 9 of 18 = 50 %, DSR 3 of 18; each OOD episode against its own twin: twins' rates 50 / 50 %.
+    assert pooled == pytest.approx({"episodes": 18, "tsr": 50.0, "tsr_change": 0.0, "dsr": 100 / 6, "dsr_change": 100 / 6 - 50})
+    assert SF.ood_cell(pooled, "tsr") == "partial, 18 of 900: 50.0 (+0.0)"  # a run short of 900 says so
+    assert SF.ood_cell(SF.pooled_ood(runs, "vo-c"), "dsr").endswith(": 16.7 (-)")  # twins not run yet
+    assert SF.pooled_ood(runs, "vt-c") is None and SF.ood_cell(None, "tsr") == "not run"
+    assert SF.ood_cell(SF.pooled_ood({"error": "x.jsonl: a record was edited"}, "vo-c"), "tsr").startswith("error")

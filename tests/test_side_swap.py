@@ -49,6 +49,11 @@ def test_agreement_tells_a_policy_that_reads_the_instruction_from_one_that_does_
     assert side_swap_agreement(ids, grounded) == {"pairs": 2, "unpaired": 2, "followed": 1, "same_instance": 1}
     with pytest.raises(ValueError, match="same instance"):
         side_swap_agreement(ids, ids)
+    # Both instances on the target (or a dead worker's record, which names neither) carry no side.
+    both = [rec(0, 1, "right", True, True), {"task_id": 0, "seed": 2, "success": False}]
+    assert side_swap_agreement(ids, both) == {"pairs": 2, "unpaired": 1, "followed": 0, "same_instance": 0}
+    with pytest.raises(ValueError, match="twice"):
+        side_swap_agreement(ids + ids[:1], blind)
 
 
 def test_the_swapped_episode_starts_from_the_id_state_and_the_expert_carries_the_other_instance(tmp_path):

@@ -2,7 +2,8 @@
 # Findings campaign, step 1 (docs/baselines.md, "The findings campaign"): the committed VO-C and
 # VT-C on a soft suite's OOD protocol, then their ID twins on this machine, then the report.
 #   [SUITE=object_soft] bash campaign/scripts/campaign_ood.sh [WORKERS=1] [POLICIES="vo-c-cpu vt-c-cpu"]
-# SUITE=spatial_soft runs the Spatial-Soft policies (campaign-data/policies/spatial_soft/).
+# SUITE=spatial_soft runs the Spatial-Soft policies (campaign-data/policies/spatial_soft/); name the
+# ones committed (POLICIES="vo-c-cpu" until VT-C is trained there): a missing policy stops the run.
 # Every stage resumes where it stopped (records are appended as episodes finish): run the same
 # command again in the next session, from a checkout that holds the records so far.
 # 1. OOD: 9 held-out conditions x 10 tasks x 10 episodes a policy, into campaign-data/results/;
@@ -31,7 +32,13 @@ for p in "${policies[@]}"; do
   "$PY" -m mani_skill_softvt.evaluate --policy "$policy_dir/$p.pt" --suite "$SUITE" --tasks all --episodes-per-task 10 \
     --workers "$WORKERS" --out campaign-data/results/twins
 done
-# One report (ood.md) over every soft suite's OOD run committed: a Spatial run must not replace the Object page.
+# One report (ood.md) over every soft suite's committed OOD run whose ID twins have run (the report
+# pairs each run with them): a Spatial run must not replace the Object page, nor a run still under
+# way stop the report.
 shopt -s nullglob
-ood=(campaign-data/results/{object,spatial}_soft_ood_*.jsonl)
+ood=()
+for f in campaign-data/results/{object,spatial}_soft_ood_*-cpu.jsonl; do
+  name=$(basename "$f")
+  [ -f "campaign-data/results/twins/${name/_ood_/_id_}" ] && ood+=("$f")
+done
 "$PY" -m softvt_campaign.studies.ood_results "${ood[@]}" --twins campaign-data/results/twins --out campaign-data/results

@@ -13,7 +13,8 @@
 # 3. evaluates it on SUITE's ID protocol, PER_TASK episodes per task (default 50, all of them; the
 #    pre-registered design scores extra training seeds on the first 25), resumable, into campaign-data/results/;
 # 4. writes the report beside the paper's numbers (all four suites, so a rigid-twin variant is
-#    paired with its soft one), the old-physics rows kept apart.
+#    paired with its soft one; the Spatial side-swap runs paired with their ID runs), the old-physics
+#    rows kept apart.
 # A policy exported in an earlier session, whose run this machine lacks, is scored as committed (step 3 on).
 # NAME defaults to <variant>-cpu, or <variant>-cpu-<recipe> for a recipe other than base. The
 # Object-Soft runs keep the unprefixed paths they were made with.

@@ -91,31 +91,42 @@ def instance_outcomes(records: list[dict]) -> dict | None:
             "both_disturbed": sum(all(d > DISTURBED_M for d in r["instance_displacement"].values()) for r in spatial)}
 
 
+def carried_instance(record: dict) -> str | None:
+    """Which instance a Spatial episode carried to the target: ``"instructed"`` (a success, the other
+    instance not on the target), ``"other"`` (the other on the target, no success), or None (neither,
+    both, or an episode that measured nothing, e.g. a dead worker's). A success needs the instance at
+    rest and released on the target; ``other_in_target`` only that the other lies in the target region."""
+    ok, other = bool(record.get("success")), bool(record.get("other_in_target"))
+    return "instructed" if ok and not other else "other" if other and not ok else None
+
+
 def side_swap_agreement(id_records: list[dict], swap_records: list[dict]) -> dict:
     """A policy's side-swap episodes against its ID episodes of the same task and seed (the same
-    scene, the other instance instructed): which instance it carried to the target in each.
+    scene, the other instance instructed): which instance it carried to the target in each
+    (:func:`carried_instance`).
 
     ``followed``: it carried the instructed instance in both (it read the instruction);
     ``same_instance``: it carried the same instance in both, the ID's instructed one or its other
-    (it ignored the instruction: a blind policy's swap success is its ID run's wrong instance);
+    (it ignored the instruction: a blind policy's swap success is its ID run's wrong instance); the
+    two are exclusive, and the pairs in neither carried nothing (or both) in at least one episode.
     ``pairs``: the pairs compared, ``unpaired``: episodes only one file holds."""
-    def by_seed(records):
-        out = {(int(r["task_id"]), int(r["seed"])): r for r in records if "instructed_instance" in r}
+    def by_seed(records, name):
+        out = {(int(r["task_id"]), int(r["seed"])): r for r in records}
         if len(out) < len(records):
-            raise ValueError("side_swap_agreement: Spatial records (naming instructed_instance), each episode once")
+            raise ValueError(f"side_swap_agreement: an episode (task, seed) appears twice in the {name} records")
         return out
 
-    ids, swaps = by_seed(id_records), by_seed(swap_records)
+    ids, swaps = by_seed(id_records, "ID"), by_seed(swap_records, "side-swap")
     common = sorted(set(ids) & set(swaps))
     for k in common:
-        if ids[k]["instructed_instance"] == swaps[k]["instructed_instance"]:
+        sides = {ids[k].get("instructed_instance"), swaps[k].get("instructed_instance")}
+        if len(sides) == 1 and None not in sides:  # a dead worker's record names no instance
             raise ValueError(f"task {k[0]} seed {k[1]}: the two episodes instruct the same instance; give the ID "
                              "records first and the side-swap records second")
-    followed = sum(bool(ids[k]["success"]) and bool(swaps[k]["success"]) for k in common)
-    same = sum(bool(ids[k]["success"]) and bool(swaps[k]["other_in_target"])
-               or bool(ids[k]["other_in_target"]) and bool(swaps[k]["success"]) for k in common)
+    carried = [(carried_instance(ids[k]), carried_instance(swaps[k])) for k in common]
     return {"pairs": len(common), "unpaired": len(ids) + len(swaps) - 2 * len(common),
-            "followed": followed, "same_instance": same}
+            "followed": sum(c == ("instructed", "instructed") for c in carried),
+            "same_instance": sum(c in (("instructed", "other"), ("other", "instructed")) for c in carried)}
 
 
 def summarize(records: list[dict]) -> dict:

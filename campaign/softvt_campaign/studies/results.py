@@ -17,7 +17,8 @@ today's variants compared on the episodes both ran (the protocol's seeds are the
 policy, so the comparison is paired: exact McNemar p-values and Newcombe's paired 95 % interval of the
 difference), and each variant on a soft suite
 against the same variant trained on its rigid twin suite, paired on the seeds both draw (the
-paper's rigid-twin comparison). ``<out>/success_traces.png`` draws
+paper's rigid-twin comparison). Each side-swap row against its ID row, paired on task and seed:
+the TSR change and which instance the policy carried in both episodes of a pair. ``<out>/success_traces.png`` draws
 the R_t traces of each variant's successes, within and beyond the tolerance (the paper's
 qualitative figure). Records given with ``--legacy`` (made under an older physics or sensor) are
 rows of their own, marked ``[old physics]``, never pooled with today's nor compared with them.
@@ -149,8 +150,9 @@ def by_instructed_instance(recs: list[dict]) -> dict[str, dict] | None:
     if instance_outcomes(recs) is None:
         return None
     out = {}
-    for side in ("all", *sorted({r["instructed_instance"] for r in recs})):
-        s = summarize([r for r in recs if side == "all" or r["instructed_instance"] == side])
+    side_of = lambda r: r.get("instructed_instance") or "unrecorded"  # noqa: E731 (a dead worker's record names none)
+    for side in ("all", *sorted({side_of(r) for r in recs})):
+        s = summarize([r for r in recs if side == "all" or side_of(r) == side])
         out[side] = {"episodes": s["episodes"], "tsr": s["tsr"], "tsr_ci95": s["tsr_ci95"],
                      "wrong_instance": s["instances"]["wrong_instance"], "both_disturbed": s["instances"]["both_disturbed"]}
     return out
@@ -183,8 +185,9 @@ def side_swaps(groups: dict) -> dict[str, dict]:
         if condition == "side_swap" and (ids := groups.get((suite, "id", variant))):
             swap = groups[(suite, condition, variant)]
             by_task_seed = lambda r: (int(r["task_id"]), int(r["seed"]))  # noqa: E731 (the two conditions pair)
-            out[f"{suite}/{variant}"] = {**side_swap_agreement(ids, swap),
-                                         "success": paired_comparison(swap, ids, "success", by_task_seed)}
+            pair = {**side_swap_agreement(ids, swap), "success": paired_comparison(swap, ids, "success", by_task_seed)}
+            if pair["pairs"]:  # a swap run on seeds the ID run never drew pairs with nothing
+                out[f"{suite}/{variant}"] = pair
     return out
 
 

@@ -25,13 +25,15 @@ import numpy as np
 from mani_skill_softvt.evaluation.seed_level import (ALPHA, contrast, episode_key, finding_verdict, first_per_task, ood_interval,
                                      outcome_of, pooled_variance, size_note, verdict)
 from mani_skill_softvt.fileio import write_page
+from mani_skill_softvt.tasks.suites import NUM_TASKS, OOD_CONDITIONS
 from .findings import POLICIES, by_policy, id_records, load, load_ood
-from .ood_results import PAPER_DP_POOLED_BY_SUITE
+from .ood_results import PAPER_DP_POOLED_BY_SUITE, against_twins
 from .results import PAPER_ID
 
 PER_TASK = 25  # the registered subset: the first 25 ID episodes of each task
 OUTCOME_NAMES = {"tsr": "TSR", "dsr": "DSR", "past_tolerance": "TSR - DSR"}
 SPATIAL = ("spatial_soft", "spatial_rigid")
+OOD_PER_TASK = 10  # the paper's OOD protocol: 10 episodes a task in each of its nine conditions (900)
 
 
 def seed_table(policies: dict, outcome: str) -> dict[tuple[str, str], list[float]]:
@@ -197,16 +199,32 @@ def seed_mean(scores: list[float]) -> str:
     return f"{np.mean(scores):.1f} ({len(scores)} seed{'s' * (len(scores) != 1)})" if scores else "not run"
 
 
-def pooled_ood(ood: dict | None, key: str) -> tuple[float, float | None, float, float | None] | None:
-    """One soft suite's OOD run of ``key`` pooled over its nine conditions: TSR and DSR (points), each
-    with its change against the run's ID twins (None before the twins have run); None if not run."""
+def pooled_ood(ood: dict | None, key: str) -> dict | None:
+    """One soft suite's OOD run of ``key`` pooled over its conditions: ``episodes``, TSR and DSR
+    (points), each with its change against the run's ID twins paired on the initial state (None
+    before the twins have run; :func:`ood_results.against_twins`); ``{"error": ...}`` where the runs
+    could not be read; None if not run."""
+    if (ood or {}).get("error"):
+        return {"error": ood["error"]}
     names = (ood or {}).get("names") or {}
     if key not in names:
         return None
     recs, twins = ood["runs"][names[key]][0], (ood.get("twins_from") or {}).get(names[key])
-    rate = lambda rs, o: 100.0 * float(np.mean([bool(r[o]) for r in rs]))  # noqa: E731
-    tsr, dsr = rate(recs, "success"), rate(recs, "dsr_success")
-    return (tsr, tsr - rate(twins, "success") if twins else None, dsr, dsr - rate(twins, "dsr_success") if twins else None)
+    out = {"episodes": len(recs)}
+    for name, outcome in (("tsr", "success"), ("dsr", "dsr_success")):
+        out[name] = 100.0 * float(np.mean([bool(r[outcome]) for r in recs]))
+        out[f"{name}_change"] = 100.0 * against_twins(recs, twins, outcome)["difference"] if twins else None
+    return out
+
+
+def ood_cell(pooled: dict | None, outcome: str) -> str:
+    """``59.8 (-30.2)``; a run short of the protocol's episodes says so, as does one that could not be read."""
+    if pooled is None or "error" in pooled:
+        return "not run" if pooled is None else "error (ood.md says)"
+    full = NUM_TASKS * OOD_PER_TASK * len(OOD_CONDITIONS)
+    change = pooled[f"{outcome}_change"]
+    text = f"{pooled[outcome]:.1f} ({'-' if change is None else f'{change:+.1f}'})"
+    return text if pooled["episodes"] >= full else f"partial, {pooled['episodes']} of {full}: {text}"
 
 
 def paper_table_lines(tables: dict, ood_by_suite: dict[str, dict | None]) -> list[str]:
@@ -237,9 +255,8 @@ def paper_table_lines(tables: dict, ood_by_suite: dict[str, dict | None]) -> lis
         cells = []
         for suite in ("object_soft", "spatial_soft"):
             ours, paper = pooled_ood(ood_by_suite.get(suite), key), PAPER_DP_POOLED_BY_SUITE[suite][key]
-            for i in (0, 2):
-                mine = "not run" if ours is None else f"{ours[i]:.1f} ({'-' if ours[i + 1] is None else f'{ours[i + 1]:+.1f}'})"
-                cells.append(cell(mine, f"{paper[i]} ({paper[i + 1]:+})"))
+            for i, outcome in ((0, "tsr"), (2, "dsr")):
+                cells.append(cell(ood_cell(ours, outcome), f"{paper[i]} ({paper[i + 1]:+})"))
         lines.append(f"| {key.upper()} | " + " | ".join(cells) + " |")
     return lines
 
