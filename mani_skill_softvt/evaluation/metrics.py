@@ -16,7 +16,7 @@ import math
 from collections import defaultdict
 
 import numpy as np
-from .protocols import episode_key
+from .protocols import episode_key, scene_key
 
 
 def deformation_ratio(d_t, tau_o: float):
@@ -111,7 +111,7 @@ def side_swap_agreement(id_records: list[dict], swap_records: list[dict]) -> dic
     two are exclusive, and the pairs in neither carried nothing (or both) in at least one episode.
     ``pairs``: the pairs compared, ``unpaired``: episodes only one file holds."""
     def by_seed(records, name):
-        out = {(int(r["task_id"]), int(r["seed"])): r for r in records}
+        out = {scene_key(r): r for r in records}
         if len(out) < len(records):
             raise ValueError(f"side_swap_agreement: an episode (task, seed) appears twice in the {name} records")
         return out

@@ -68,6 +68,12 @@ def episode_key(ep: dict) -> tuple:
     return (ep["suite"], int(ep["task_id"]), ep["condition"], int(ep["seed"]))
 
 
+def scene_key(ep: dict) -> tuple:
+    """An episode's initial state within its suite, whichever condition: the side swap (and the
+    doubled placement) reuse the ID seeds, so their episodes pair with the ID ones on this."""
+    return (int(ep["task_id"]), int(ep["seed"]))
+
+
 def seed_key(ep: dict) -> tuple:
     """An episode's place in its protocol, whichever objects: a soft suite and its rigid twin
     draw the same seeds (:func:`episodes`), so their episodes pair on this."""

@@ -34,7 +34,7 @@ from matplotlib.figure import Figure
 
 from mani_skill_softvt.evaluation.metrics import (group_summaries, instance_outcomes, paired_comparison, percent,
                                                   percent_ci, side_swap_agreement, summarize)
-from mani_skill_softvt.evaluation.protocols import episode_key, seed_key
+from mani_skill_softvt.evaluation.protocols import episode_key, scene_key, seed_key
 from mani_skill_softvt.evaluation.sidecar import machine, numerics, sidecar
 from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.report import rt_series
@@ -184,8 +184,7 @@ def side_swaps(groups: dict) -> dict[str, dict]:
     for suite, condition, variant in sorted(k for k in groups if not is_legacy(k)):
         if condition == "side_swap" and (ids := groups.get((suite, "id", variant))):
             swap = groups[(suite, condition, variant)]
-            by_task_seed = lambda r: (int(r["task_id"]), int(r["seed"]))  # noqa: E731 (the two conditions pair)
-            pair = {**side_swap_agreement(ids, swap), "success": paired_comparison(swap, ids, "success", by_task_seed)}
+            pair = {**side_swap_agreement(ids, swap), "success": paired_comparison(swap, ids, "success", scene_key)}
             if pair["pairs"]:  # a swap run on seeds the ID run never drew pairs with nothing
                 out[f"{suite}/{variant}"] = pair
     return out
