@@ -33,6 +33,9 @@ def test_ood_is_read_against_its_id_twins_paired_and_by_stiffness():
     assert (v["paired_tsr"]["only_a"], v["paired_tsr"]["only_b"], v["paired_tsr"]["pairs"]) == (0, 6, 20)
     assert v["paired_tsr"]["difference"] == pytest.approx(-0.3)
     assert v["paired_dsr"]["only_b"] == 16 and v["paired_dsr"]["p_value"] < 1e-4
+    # Pooled, the 20 pairs are 10 scenes (each twin serves two conditions): clustered by initial state.
+    clustered = v["paired_tsr"]["clustered"]
+    assert (clustered["pairs"], clustered["clusters"]) == (20, 10) and clustered["difference"] == pytest.approx(-30.0)
     # Stiffness: x1.0 is the twins, x0.5 the softened episodes; no x0.8 / x2.0 ran.
     assert set(v["stiffness"]) == {0.5, 1.0}
     assert v["stiffness"][1.0]["r_max"]["median"] == pytest.approx(0.5) and v["stiffness"][1.0]["episodes"] == 10

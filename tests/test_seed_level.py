@@ -186,6 +186,23 @@ def test_seed_findings_judge_the_registered_spatial_claims_and_give_both_verdict
     assert "| VO-C | not run / 29.2 (-8.2) |" in text  # no OOD run
 
 
+def test_a_scene_reused_by_nine_conditions_counts_once_in_the_clustered_difference():
+    rng = np.random.default_rng(0)
+    a, b = rng.random(100) < 0.6, rng.random(100) < 0.4
+    once = S.clustered_difference(a, b, range(100))
+    # Independent pairs: the paired differences' standard error (up to statsmodels' small-sample factor).
+    d = 100.0 * (b.astype(float) - a)
+    assert once["difference"] == pytest.approx(d.mean())
+    assert once["se"] == pytest.approx(d.std(ddof=1) / 10, rel=0.02)
+    # Nine copies of each pair in its scene's cluster carry one scene's information, not nine.
+    nine = S.clustered_difference(np.repeat(a, 9), np.repeat(b, 9), np.repeat(np.arange(100), 9))
+    assert nine["difference"] == pytest.approx(once["difference"])
+    assert nine["se"] == pytest.approx(once["se"], rel=0.02) and nine["clusters"] == 100
+    assert S.clustered_difference([True, False], [True, False], [0, 1])["p_value"] == 1.0  # no pair differs
+    with pytest.raises(ValueError, match="2 A outcomes, 1 B outcomes"):
+        S.clustered_difference([True, False], [True], [0, 1])
+
+
 def test_pooled_ood_is_the_rate_over_the_nine_conditions_against_the_id_twins():
     from softvt_campaign.studies import seed_findings as SF
 

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from .protocols import episode_key, scene_key
+
 ALPHA = 0.05
 EQUIVALENCE_MARGIN = 5.0  # points of TSR, DSR or TSR - DSR: fixed on 2026-12-02, before any record it judges
 OUTCOMES = {"tsr": "success", "dsr": "dsr_success", "past_tolerance": "past_tolerance"}
@@ -52,10 +54,6 @@ def outcome_of(record: dict, outcome: str) -> bool:
     if outcome == "past_tolerance":
         return bool(record["success"]) and not bool(record["dsr_success"])
     return bool(record[OUTCOMES[outcome]])
-
-
-def episode_key(record: dict) -> tuple:
-    return record["suite"], int(record["task_id"]), record["condition"], int(record["seed"])
 
 
 def first_per_task(keys, n: int | None) -> set:
@@ -133,23 +131,43 @@ def compare_seeds(a, b, family: tuple[float | None, int] | None = None) -> Compa
     return contrast([a, b], [-1.0, 1.0], family)
 
 
+def clustered_difference(a, b, clusters) -> dict:
+    """Mean of B - A over pairs of outcomes (points), with statsmodels' cluster-robust standard
+    error and a normal 95 % interval and p-value. The pairs of one cluster (an initial state
+    the nine OOD conditions reuse, or one ID twin paired with nine OOD episodes) are not independent
+    draws: an exact McNemar over them counts each scene up to nine times."""
+    import statsmodels.api as sm
+
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.shape != b.shape or len(clusters) != len(a) or not len(a):
+        raise ValueError(f"clustered_difference: {len(a)} A outcomes, {len(b)} B outcomes, {len(clusters)} clusters")
+    label: dict = {}
+    groups = np.array([label.setdefault(c, len(label)) for c in clusters] * 2)
+    x = sm.add_constant(np.r_[np.zeros(len(a)), np.ones(len(b))])
+    with np.errstate(invalid="ignore"):  # no spread: a variance of -0.0 (rounding) has no square root
+        fit = sm.OLS(100.0 * np.r_[a, b], x).fit(cov_type="cluster", cov_kwds={"groups": groups})
+        diff, se = float(fit.params[1]), float(fit.bse[1])
+    if not se > 0:  # every pair alike, or every pair differing the same way: no spread to test against
+        se, p, ci = 0.0, (1.0 if diff == 0 else 0.0), (diff, diff)
+    else:
+        p = float(2 * stats.norm.sf(abs(diff) / se))
+        z = stats.norm.ppf(1 - ALPHA / 2)
+        ci = (diff - z * se, diff + z * se)
+    return {"difference": diff, "se": se, "ci95": ci, "p_value": p, "pairs": len(a), "clusters": len(label)}
+
+
 def ood_interval(a: list[dict], b: list[dict], outcome: str, seed_variance: tuple[float | None, int],
                  n_a: int = 1, n_b: int = 1) -> Comparison:
     """B - A on OOD episodes (one run each), clustered by initial state (the ID seed every condition
     reuses), plus the seed-to-seed variance measured on the ID protocol. Degrees of freedom: the
     seed variance's (the smaller, and the one that dominates)."""
-    import statsmodels.api as sm
-
     ka, kb = {episode_key(r): r for r in a}, {episode_key(r): r for r in b}
     common = sorted(set(ka) & set(kb))
     if not common:
         raise ValueError("the OOD runs share no episode")
-    y = np.array([outcome_of(ka[e], outcome) for e in common] + [outcome_of(kb[e], outcome) for e in common], float)
-    x = sm.add_constant(np.r_[np.zeros(len(common)), np.ones(len(common))])
-    state = {}  # the initial state, (suite, task, seed), as a cluster label
-    groups = np.array([state.setdefault((e[0], e[1], e[3]), len(state)) for e in common] * 2)
-    fit = sm.OLS(100.0 * y, x).fit(cov_type="cluster", cov_kwds={"groups": groups})
-    diff, se_episodes = float(fit.params[1]), float(fit.bse[1])
+    c = clustered_difference([outcome_of(ka[e], outcome) for e in common], [outcome_of(kb[e], outcome) for e in common],
+                             [scene_key(ka[e]) for e in common])
+    diff, se_episodes = c["difference"], c["se"]
     var, df = seed_variance
     if var is None:
         return Comparison(diff, n_a, n_b, None, 0, None, None)

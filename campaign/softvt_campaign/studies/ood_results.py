@@ -36,6 +36,8 @@ from matplotlib.figure import Figure
 
 from mani_skill_softvt.evaluation.metrics import paired_comparison, percent, percent_ci, summarize
 from mani_skill_softvt.evaluation.records import read_records
+from mani_skill_softvt.evaluation.protocols import episode_key, scene_key
+from mani_skill_softvt.evaluation.seed_level import clustered_difference
 from mani_skill_softvt.evaluation.runner import single_run
 from mani_skill_softvt.fileio import atomic_write, atomic_write_json
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, PhysicalFactors
@@ -91,16 +93,33 @@ def id_twins(ood: list[dict], id_records: list[dict]) -> list[dict]:
 
 
 def against_twins(ood: list[dict], twins: list[dict], outcome: str) -> dict:
-    """OOD against ID, paired on the seed: the ID twin of every OOD episode (condition set to match)."""
-    by_seed = {(r["suite"], r["task_id"], r["seed"]): r for r in twins}
+    """OOD against ID, paired on the seed: the ID twin of every OOD episode (condition set to match),
+    with the difference clustered by initial state beside the exact McNemar (:func:`paired_clustered`)."""
+    by_seed = {scene_key(r): r for r in twins}
     pairs_a, pairs_b = [], []
     for i, r in enumerate(ood):
-        twin = by_seed.get((r["suite"], r["task_id"], r["seed"]))
+        twin = by_seed.get(scene_key(r))
         if twin is not None:  # one ID twin serves the nine conditions: each pair gets its own key
             key = {"suite": r["suite"], "task_id": r["task_id"], "condition": f"pair{i}", "seed": r["seed"]}
             pairs_a.append({**r, **key})
             pairs_b.append({**twin, **key})
-    return paired_comparison(pairs_a, pairs_b, outcome)
+    return paired_clustered(pairs_a, pairs_b, outcome)
+
+
+def paired_clustered(a: list[dict], b: list[dict], outcome: str) -> dict:
+    """:func:`paired_comparison` of A against B (A - B) with ``"clustered"``: the same difference in
+    points with its interval and p clustered by initial state. Pooled over the nine conditions each
+    scene (and its ID twin) is counted nine times, so the McNemar p of a pooled row treats 900 pairs
+    as independent where there are 100 scenes; the registered OOD inference
+    (docs/preregistration.md) clusters likewise."""
+    comparison = paired_comparison(a, b, outcome)
+    by_b = {episode_key(r): r for r in b}
+    pairs = [(r, by_b[episode_key(r)]) for r in a if episode_key(r) in by_b]
+    if not pairs:
+        return {**comparison, "clustered": None}
+    c = clustered_difference([y[outcome] for _, y in pairs], [x[outcome] for x, _ in pairs],
+                             [scene_key(x) for x, _ in pairs])
+    return {**comparison, "clustered": c}
 
 
 def r_max_stats(records: list[dict]) -> dict:
@@ -147,8 +166,9 @@ def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str
                 ca, cb = [r for r in oa if r["condition"] == c], [r for r in ob if r["condition"] == c]
                 if ca and cb:
                     per[c] = {"tsr": paired_comparison(cb, ca, "success"), "dsr": paired_comparison(cb, ca, "dsr_success")}
-            out["vo_vs_vt"][f"{b} vs {a}"] = {"pooled_tsr": paired_comparison(ob, oa, "success"),
-                                             "pooled_dsr": paired_comparison(ob, oa, "dsr_success"), "per_condition": per}
+            out["vo_vs_vt"][f"{b} vs {a}"] = {
+                "pooled_tsr": paired_clustered(ob, oa, "success"), "pooled_dsr": paired_clustered(ob, oa, "dsr_success"),
+                "per_condition": per}
     return out
 
 
@@ -160,6 +180,21 @@ def paper_condition(suite: str, variant: str, condition: str) -> str:
 
 def _points(x: float) -> str:
     return f"{100 * x:+.1f}"
+
+
+def _clustered(comparison: dict) -> str:
+    """A paired difference in points with its p: clustered by initial state where the comparison
+    carries that (pooled rows), else its exact McNemar."""
+    c = comparison.get("clustered")
+    if c is None:
+        return f"{_points(comparison['difference'])} ({comparison['p_value']:.2g})"
+    return f"{c['difference']:+.1f} [{c['ci95'][0]:+.1f}, {c['ci95'][1]:+.1f}] ({c['p_value']:.2g})"
+
+
+def paper_of(variant: str) -> str:
+    """The paper's configuration a column's variant is set beside, with its suite when not Object-Soft."""
+    suite = variant.partition(" (")[2].rstrip(")")
+    return f"{paper_key(variant)} ({suite})" if suite else paper_key(variant)
 
 
 def _iqr(stats: dict) -> str:
@@ -175,10 +210,15 @@ def build(result: dict) -> str:
              "Nine held-out single-factor conditions x 10 tasks x 10 episodes = 900 per variant, each from an ID "
              "episode's initial state. Changes against ID: the paper's Delta is against its full ID entry (here all "
              "50 ID episodes of each task the OOD records hold, 500 when complete); *paired* is against the ID twins "
-             "(the same seeds, 100 episodes when complete), exact McNemar.", "",
+             "(the same seeds, 100 episodes when complete), exact McNemar per condition. Pooled over the nine "
+             "conditions each initial state (and its ID twin) appears nine times, so a pooled row's interval and p are "
+             "clustered by initial state (cluster-robust, statsmodels), not McNemar's over 900 pairs as if independent. "
+             "All intervals here are over episodes of one training run: a comparison of recipes is over training seeds "
+             "(seed_findings.md).", "",
              "## Pooled over the nine conditions", "",
              "| variant | OOD episodes | TSR % [95% CI] | DSR % [95% CI] | TSR - DSR | TSR vs ID | DSR vs ID "
-             "| TSR vs ID twins, paired (p) | DSR vs ID twins, paired (p) | paper DP TSR (Delta) / DSR (Delta) |",
+             "| TSR vs ID twins, paired [95% CI] (p), clustered | DSR vs ID twins, paired [95% CI] (p), clustered "
+             "| paper DP TSR (Delta) / DSR (Delta) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for v, r in result["variants"].items():
         p, i = r["pooled"], r["id"]
@@ -187,12 +227,11 @@ def build(result: dict) -> str:
         lines.append(
             f"| {v} | {p['episodes']} | {percent_ci(p['tsr'], p['tsr_ci95'])} | {percent_ci(p['dsr'], p['dsr_ci95'])} | "
             f"{percent(p['gap'])} | {_points(p['tsr'] - i['tsr']) if i else '-'} | {_points(p['dsr'] - i['dsr']) if i else '-'} | "
-            f"{_points(r['paired_tsr']['difference'])} ({r['paired_tsr']['p_value']:.2g}) | "
-            f"{_points(r['paired_dsr']['difference'])} ({r['paired_dsr']['p_value']:.2g}) | {paper_txt} |")
+            f"{_clustered(r['paired_tsr'])} | {_clustered(r['paired_dsr'])} | {paper_txt} |")
     lines += ["", "## Per condition (TSR / DSR %, episodes), beside the paper's Diffusion Policy", ""]
     variants = list(result["variants"])
     lines.append("| condition | " + " | ".join(f"{v}" for v in variants) + " | " +
-                 " | ".join(f"paper DP {paper_key(v)}" for v in variants) + " |")
+                 " | ".join(f"paper DP {paper_of(v)}" for v in variants) + " |")
     lines.append("|---" * (1 + 2 * len(variants)) + "|")
     for c in OOD_CONDITIONS:
         cells = []
@@ -216,14 +255,14 @@ def build(result: dict) -> str:
             lines.append(f"| x{scale:g} | {v} | {percent(s['tsr'], 0)} | {percent(s['dsr'], 0)} | {_iqr(s['r_max'])} | "
                          f"{s['episodes']} | {paper_txt} |")
     if result["vo_vs_vt"]:
-        lines += ["", "## Touch under shift: VT against VO on the same episodes (paired, exact McNemar)", "",
-                  "| comparison | condition | pairs | TSR, VT - VO (p) | DSR, VT - VO (p) |", "|---|---|---|---|---|"]
+        lines += ["", "## Touch under shift: VT against VO on the same episodes (paired: pooled clustered by initial "
+                  "state, per condition exact McNemar)", "",
+                  "| comparison | condition | pairs | TSR, VT - VO [95% CI, pooled] (p) | DSR, VT - VO [95% CI, pooled] (p) |", "|---|---|---|---|---|"]
         for name, comp in result["vo_vs_vt"].items():
             rows = [("pooled", comp["pooled_tsr"], comp["pooled_dsr"])]
             rows += [(c, x["tsr"], x["dsr"]) for c, x in comp["per_condition"].items()]
             for c, t, d in rows:
-                lines.append(f"| {name} | {c} | {t['pairs']} | {_points(t['difference'])} ({t['p_value']:.2g}) | "
-                             f"{_points(d['difference'])} ({d['p_value']:.2g}) |")
+                lines.append(f"| {name} | {c} | {t['pairs']} | {_clustered(t)} | {_clustered(d)} |")
     return "\n".join(lines) + "\n"
 
 
