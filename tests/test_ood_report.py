@@ -103,3 +103,19 @@ def test_both_soft_suites_in_one_report_each_beside_its_own_paper_entry(tmp_path
     assert "| light_67.5 | 20 / 20 (10) | 20 / 20 (10) | 20 / 20 (10) | 20 / 20 (10) | 0 / 0 | 1 / 1 | 0 / 0 | 19 / 14 |" in text
     assert "11.0 (-4.6) / 8.8 (-4.6)" in text and "25.2 (-7.8) / 17.8 (-7.2)" in text  # the paper's pooled Spatial-Soft rows
     assert all(len(O.PAPER_DP_OOD[s][v]) == len(OOD_CONDITIONS) for s in O.PAPER_DP_OOD for v in O.PAPER_DP_OOD[s])
+
+
+def test_a_spatial_run_counts_the_other_instance_on_the_plate_by_condition():
+    def spatial(task, i, condition, other_on_plate, moved):
+        rec = _rec(task, i, condition, not other_on_plate, 0.5, suite="spatial_soft")
+        rec.update(instructed_instance="left", other_in_target=other_on_plate,
+                   instance_displacement={"left": 0.05, "right": 0.05 if moved else 0.0})
+        return rec
+
+    id_records = [spatial(0, i, "id", i < 3, False) for i in range(10)]
+    ood = [spatial(0, i, "mass_x2.5", i < 4, i == 9) for i in range(10)]
+    text = O.build(O.analyse({"vo-c,cpu (spatial_soft)": (ood, id_records)}))
+    assert "| id twins | 3 / 0 (10) |" in text and "| mass_x2.5 | 4 / 1 (10) |" in text
+    assert "| light_67.5 | - |" in text and "| pooled | 4 / 1 (10) |" in text
+    object_only = O.build(O.analyse({"vo-c,cpu": ([_rec(0, 0, "mass_x2.5", True, 0.5)], [_rec(0, 0, "id", True, 0.5)])}))
+    assert "Which instance" not in object_only  # Object records name no instance

@@ -199,6 +199,7 @@ def test_a_scene_reused_by_nine_conditions_counts_once_in_the_clustered_differen
     assert nine["difference"] == pytest.approx(once["difference"])
     assert nine["se"] == pytest.approx(once["se"], rel=0.02) and nine["clusters"] == 100
     assert S.clustered_difference([True, False], [True, False], [0, 1])["p_value"] == 1.0  # no pair differs
+    assert S.clustered_difference([False, False], [True, True], [7, 7])["ci95"] is None  # one scene: no spread
     with pytest.raises(ValueError, match="2 A outcomes, 1 B outcomes"):
         S.clustered_difference([True, False], [True], [0, 1])
 

@@ -143,6 +143,9 @@ def clustered_difference(a, b, clusters) -> dict:
         raise ValueError(f"clustered_difference: {len(a)} A outcomes, {len(b)} B outcomes, {len(clusters)} clusters")
     label: dict = {}
     groups = np.array([label.setdefault(c, len(label)) for c in clusters] * 2)
+    if len(label) < 2:  # one cluster: its errors estimate no spread between clusters
+        return {"difference": 100.0 * float(b.mean() - a.mean()), "se": None, "ci95": None, "p_value": None,
+                "pairs": len(a), "clusters": len(label)}
     x = sm.add_constant(np.r_[np.zeros(len(a)), np.ones(len(b))])
     with np.errstate(invalid="ignore"):  # no spread: a variance of -0.0 (rounding) has no square root
         fit = sm.OLS(100.0 * np.r_[a, b], x).fit(cov_type="cluster", cov_kwds={"groups": groups})
@@ -167,7 +170,7 @@ def ood_interval(a: list[dict], b: list[dict], outcome: str, seed_variance: tupl
         raise ValueError("the OOD runs share no episode")
     c = clustered_difference([outcome_of(ka[e], outcome) for e in common], [outcome_of(kb[e], outcome) for e in common],
                              [scene_key(ka[e]) for e in common])
-    diff, se_episodes = c["difference"], c["se"]
+    diff, se_episodes = c["difference"], (math.nan if c["se"] is None else c["se"])  # nan: no interval
     var, df = seed_variance
     if var is None:
         return Comparison(diff, n_a, n_b, None, 0, None, None)

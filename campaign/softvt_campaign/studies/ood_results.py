@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from mani_skill_softvt.evaluation.metrics import paired_comparison, percent, percent_ci, summarize
+from mani_skill_softvt.evaluation.metrics import DISTURBED_M, paired_comparison, percent, percent_ci, summarize
 from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.protocols import episode_key, scene_key
 from mani_skill_softvt.evaluation.seed_level import clustered_difference
@@ -182,12 +182,34 @@ def _points(x: float) -> str:
     return f"{100 * x:+.1f}"
 
 
+def instance_lines(result: dict) -> list[str]:
+    """The Spatial runs' instance counts, by condition: a success on the wrong instance is one the
+    policy read the scene for, not the instruction (docs/evaluation.md)."""
+    spatial = [v for v, r in result["variants"].items() if r["pooled"].get("instances")]
+    if not spatial:
+        return []
+    lines = ["", f"## Which instance (Spatial suites): the other instance on the target / both instances disturbed "
+                 f"(> {100 * DISTURBED_M:g} cm) (episodes)", "",
+             "| condition | " + " | ".join(spatial) + " |", "|---" * (1 + len(spatial)) + "|"]
+    for c in ("id_twins", *OOD_CONDITIONS, "pooled"):
+        cells = []
+        for v in spatial:
+            r = result["variants"][v]
+            s = r.get(c) if c in ("id_twins", "pooled") else r["per_condition"].get(c)
+            i = (s or {}).get("instances")
+            cells.append(f"{i['wrong_instance']} / {i['both_disturbed']} ({i['episodes']})" if i else "-")
+        lines.append(f"| {c.replace('_', ' ') if c == 'id_twins' else c} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def _clustered(comparison: dict) -> str:
     """A paired difference in points with its p: clustered by initial state where the comparison
     carries that (pooled rows), else its exact McNemar."""
     c = comparison.get("clustered")
     if c is None:
         return f"{_points(comparison['difference'])} ({comparison['p_value']:.2g})"
+    if c["ci95"] is None:
+        return f"{c['difference']:+.1f} (one scene: no interval)"
     return f"{c['difference']:+.1f} [{c['ci95'][0]:+.1f}, {c['ci95'][1]:+.1f}] ({c['p_value']:.2g})"
 
 
@@ -240,6 +262,7 @@ def build(result: dict) -> str:
             cells.append(f"{percent(s['tsr'], 0)} / {percent(s['dsr'], 0)} ({s['episodes']})" if s else "-")
         papers = [paper_condition(result["variants"][v]["suite"], v, c) for v in variants]
         lines.append(f"| {c} | " + " | ".join(cells) + " | " + " | ".join(papers) + " |")
+    lines += instance_lines(result)
     lines += ["", "## Under stiffness shift (the paper's stiffness table; x1.0 is the ID twins)", "",
               "| E scale | variant | TSR % | DSR % | R_max median [IQR] | N | paper DP: TSR / DSR / R_max median [IQR] |",
               "|---|---|---|---|---|---|---|"]
