@@ -28,12 +28,22 @@ def test_a_sidecar_entry_fills_in_what_a_file_does_not_say(tmp_path):
     assert "AMD EPYC (its instruction set unrecorded)" in N.reproduction_note(stackless[0], EPYC, entry)
 
 
-def test_a_table_of_files_from_two_machines_says_it_crosses_them():
+def test_a_table_of_files_from_two_machines_says_what_its_rows_may_compare():
     xeon = [{"receipt": {"stack": {"cpu": "Intel(R) Xeon(R) Processor"}}}]
     epyc = [{"receipt": {"stack": EPYC}}]
     text = "\n".join(provenance_lines([("a.jsonl", epyc, None), ("b.jsonl", xeon, None)]))
-    assert "cross machines" in text and "| a.jsonl | AMD EPYC" in text
-    assert "cross machines" not in "\n".join(provenance_lines([("a.jsonl", epyc, None), ("c.jsonl", epyc, None)]))
+    assert "cross machines" in text and "not their records" in text and "| a.jsonl | AMD EPYC" in text
+    assert "cross" not in "\n".join(provenance_lines([("a.jsonl", epyc, None), ("c.jsonl", epyc, None)]))
+    # Under today's full pins a record keeps its bits across vendors (the goldens): records compare.
+    pinned = {"name": N.PINNED, "parts": list(N.PARTS)}
+    full = [{"receipt": {"stack": s, "numerics": pinned}} for s in (EPYC, {"cpu": "Intel(R) Xeon(R) Processor"})]
+    note = P.crossing_note([(P.machine(full), P.numerics(full))])  # one file resumed on the other vendor
+    assert "cross machines (AMD EPYC; Intel(R) Xeon(R) Processor)" in note and "their records compare" in note
+    # The pins before vml kept a policy's bits on its vendor only; two numerics never compare records.
+    before = [{"receipt": {"stack": s, "numerics": {**pinned, "parts": [p for p in N.PARTS if p != "vml"]}}}
+              for s in (EPYC, {"cpu": "Intel(R) Xeon(R) Processor"})]
+    assert "not their records" in P.crossing_note([(P.machine(before), P.numerics(before))])
+    assert "cross numerics" in P.crossing_note([(P.machine(full), P.numerics(full)), (P.machine(before), P.numerics(before))])
 
 
 def test_the_committed_sidecars_name_every_file_that_does_not_name_its_machine():

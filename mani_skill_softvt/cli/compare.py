@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from ..evaluation.metrics import paired_comparison
-from ..evaluation.sidecar import machine, numerics, sidecar
+from ..evaluation.sidecar import crossing_note, machine, numerics, sidecar
 from ..evaluation.records import read_records
 from ..evaluation.seed_level import (OUTCOMES, compare_seeds, episode_key, first_per_task, outcome_of, rliable_summary,
                                     seed_scores, size_note, verdict)
@@ -80,8 +80,9 @@ def machines(paths: list[Path], runs: list[list[dict]]) -> str:
     them), and whether the comparison crosses machines or numerics."""
     rows = [(Path(p).name, machine(run, sidecar(p)), numerics(run, sidecar(p))) for p, run in zip(paths, runs)]
     lines = ["\nwhere the records ran:"] + [f"  {n}: {m}; numerics {x}" for n, m, x in rows]
-    if len({m for _, m, _ in rows}) > 1 or len({x for _, _, x in rows}) > 1:
-        lines.append("  the files cross machines or numerics: their rates compare, their records do not")
+    note = crossing_note([(m, x) for _, m, x in rows])
+    if note:
+        lines.append(f"  {note}")
     return "\n".join(lines)
 
 

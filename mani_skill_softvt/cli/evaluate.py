@@ -53,7 +53,8 @@ def main(argv=None) -> dict:
                          "in this process) | ws://HOST:PORT (a policy server speaking openpi's protocol; "
                          "needs an obs mode with rgb: rgb, rgbd, each +tactile) | PATH/policy.pt (a trained Diffusion Policy "
                          "baseline, softvt-train)")
-    ap.add_argument("--tasks", nargs="+", default=[str(t) for t in DEFAULT_TASKS], help="task ids, or 'all'")
+    ap.add_argument("--tasks", nargs="+", default=None,
+                    help=f"task ids, or 'all' (default {' '.join(map(str, DEFAULT_TASKS))}; with --reproduce, every task of the file)")
     ap.add_argument("--episodes-per-task", type=int, default=None, help="default 1")
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
@@ -88,13 +89,14 @@ def main(argv=None) -> dict:
                                 ("--control-mode", args.control_mode), ("--camera-size", args.camera_size)) if v]
         if given:
             ap.error(f"--reproduce runs the records' own policy and configuration; drop {', '.join(given)}")
-        return _reproduce(ap, existing_path(args.reproduce, "--reproduce"), args.episodes_per_task or 1, args.workers)
+        return _reproduce(ap, existing_path(args.reproduce, "--reproduce"), args.episodes_per_task or 1, args.workers,
+                          args.tasks)
     if args.video < 0:
         ap.error("--video must be >= 0")
     def resolve(obs_mode):
         return RunConfig.resolve(args.policy, obs_mode, args.control_mode,
                                  None if args.camera_size is None else CameraSize.of(args.camera_size, "--camera-size"),
-                                 suite=args.suite, protocol=args.protocol, tasks=args.tasks,
+                                 suite=args.suite, protocol=args.protocol, tasks=args.tasks or DEFAULT_TASKS,
                                  episodes_per_task=1 if args.episodes_per_task is None else args.episodes_per_task,
                                  conditions=args.conditions)
 
@@ -147,12 +149,15 @@ def main(argv=None) -> dict:
     return {"records": records}
 
 
-def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: int) -> dict:
+def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: int, tasks: list[str] | None) -> dict:
     if not Path(path).is_file():
         ap.error(f"--reproduce: {path} does not exist")
+    if tasks not in (None, ["all"]) and not all(t.isdigit() for t in tasks):
+        ap.error(f"--tasks {' '.join(tasks)}: give task ids (0-9) or 'all'")
     bar = tqdm(desc=f"reproduce {Path(path).name}", unit="episode")
     try:
-        results = reproduce(path, per_task, workers, progress=bar.update)
+        results = reproduce(path, per_task, workers, progress=bar.update,
+                            tasks=None if tasks in (None, ["all"]) else tuple(int(t) for t in tasks))
     except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
         ap.error(str(e))
     bar.close()

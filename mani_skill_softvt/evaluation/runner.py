@@ -299,9 +299,10 @@ def single_run(records: list[dict], path: Path) -> str | None:
     return next(iter(hashes), None)
 
 
-def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
-              progress=None) -> list[tuple[dict, dict | None, list[str]]]:
-    """Run the first ``per_task`` recorded episodes of each task in ``path`` again (None: all), with
+def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=None,
+              tasks: tuple[int, ...] | None = None) -> list[tuple[dict, dict | None, list[str]]]:
+    """Run the first ``per_task`` recorded episodes of each task in ``path`` (of ``tasks`` only, where
+    given) again (None: all), with
     the configuration and the numerics they were recorded with (a record made before the numerics
     were pinned ran on each library's native dispatch, and is replayed so); (stored record, new
     record, the fields that differ) each.
@@ -327,9 +328,14 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1,
     size = first.get("camera_size")
     run = RunConfig.resolve(spec, first["obs_mode"], first["control_mode"], tuple(size) if size else None,
                             suite=first["suite"], protocol=protocol_of(first["condition"]))
+    if tasks is not None and not {r["task_id"] for r in records} & set(tasks):
+        raise ValueError(f"{path}: holds no records of tasks {list(tasks)} (it has "
+                         f"{sorted({r['task_id'] for r in records})}); name tasks it has, or leave --tasks out")
     chosen, count = [], defaultdict(int)
     for r in records:
         key = (r["suite"], r["task_id"])
+        if tasks is not None and r["task_id"] not in tasks:
+            continue
         if per_task is None or count[key] < per_task:
             count[key] += 1
             chosen.append(r)

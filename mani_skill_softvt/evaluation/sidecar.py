@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_json
-from ..provenance.numerics import machine_kind, numerics_of
+from ..provenance.numerics import PINNED, machine_kind, numerics_of
 
 PROVENANCE_FILE = "provenance.json"
 
@@ -54,3 +54,23 @@ def numerics(records: list[dict], entry: dict | None = None) -> str:
     if entry and entry.get("numerics"):
         return f"{entry['numerics']} (per sidecar)"
     return "native (before the pins)"
+
+
+def crossing_note(rows: list[tuple[str, str]]) -> str | None:
+    """What a table over records files may compare, given each file's (:func:`machine`, :func:`numerics`):
+    None where they share one machine kind and one numerics. Under today's full pins a record keeps
+    its bits on any x86-64 machine (the goldens pass on Intel Xeons and on AMD EPYCs with and without
+    AVX-512), so crossing machines leaves records comparable; under anything else the same episode
+    may round differently on another kind, and only rates compare."""
+    kinds = {one.removesuffix(" (per sidecar)").split(" (")[0] for m, _ in rows for one in m.split("; ")}
+    names = {one.removesuffix(" (per sidecar)") for _, x in rows for one in x.split("; ")}
+    if len(names) > 1:
+        return (f"These rows cross numerics ({'; '.join(sorted(names))}): compare their rates, not their "
+                "records (docs/install.md, numerics).")
+    if len(kinds) < 2:
+        return None
+    if names == {PINNED} and "unrecorded" not in kinds:
+        return (f"These rows cross machines ({'; '.join(sorted(kinds))}) under the full pins ({PINNED}), which "
+                "give the same bits on any x86-64 machine: their records compare too (docs/install.md, numerics).")
+    return (f"These rows cross machines ({'; '.join(sorted(kinds))}) under numerics whose bits depend on the "
+            "CPU: compare their rates, not their records (docs/install.md, numerics).")

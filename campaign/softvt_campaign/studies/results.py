@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 from mani_skill_softvt.evaluation.metrics import (group_summaries, instance_outcomes, paired_comparison, percent,
                                                   percent_ci, side_swap_agreement, summarize)
 from mani_skill_softvt.evaluation.protocols import episode_key, scene_key, seed_key
-from mani_skill_softvt.evaluation.sidecar import machine, numerics, sidecar
+from mani_skill_softvt.evaluation.sidecar import crossing_note, machine, numerics, sidecar
 from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.report import rt_series
 from mani_skill_softvt.evaluation.run import policy_tag
@@ -311,18 +311,14 @@ def build(groups: dict[tuple[str, str, str], list[dict]]) -> tuple[str, dict]:
 
 def provenance_lines(files: list[tuple[str, list[dict], dict | None]]) -> list[str]:
     """Where each records file ran (its records' stack and numerics, else its provenance sidecar
-    entry), and a warning when the files cross machines: rows made on different kinds compare by
-    rate, not record by record."""
+    entry), and what the rows may compare when they cross machines or numerics (``sidecar.crossing_note``)."""
     lines = ["", "| records file | machine | numerics | evidence (sidecar) |", "|---|---|---|---|"]
-    kinds = set()
-    for name, recs, entry in files:
-        where = machine(recs, entry)
-        kinds.add(where.removesuffix(" (per sidecar)").split(" (")[0])
-        lines.append(f"| {name} | {where} | {numerics(recs, entry)} | {(entry or {}).get('evidence', '-')} |")
-    if len(kinds - {"unrecorded"}) > 1 or "unrecorded" in kinds and len(kinds) > 1:
-        lines.append(f"\nThese rows cross machines ({'; '.join(sorted(kinds))}): made before the numerics were "
-                     "pinned, the same episode rounds differently on another kind, so compare their rates, not "
-                     "their records (docs/install.md, numerics).")
+    rows = [(machine(recs, entry), numerics(recs, entry)) for _, recs, entry in files]
+    for (name, _, entry), (where, made_under) in zip(files, rows):
+        lines.append(f"| {name} | {where} | {made_under} | {(entry or {}).get('evidence', '-')} |")
+    note = crossing_note(rows)
+    if note:
+        lines.append(f"\n{note}")
     return lines
 
 
