@@ -75,8 +75,8 @@ PARTS: dict[str, dict[str, str]] = {
     # AMD's differ; the oneMKL reference, "Named Constants for CNR Control"): the likely cause of a
     # policy's Intel/AMD difference. Its CPU type 1 is the SSE2 kernels, which hold no rcpps/rsqrtps
     # (nor any other approximation instruction): measured on an Intel Xeon 2026-12-06, docs/install.md.
-    # MKL_VML_DEBUG_CPU_TYPE is VML's own (undocumented) override, read at its first call; that AMD CPUs
-    # honour it too is not yet measured (resolved() reads back what VML runs).
+    # MKL_VML_DEBUG_CPU_TYPE is VML's own (undocumented) override, read at its first call; AMD CPUs honour
+    # it too (an AMD EPYC, 2026-12-06: the policy goldens pass; resolved() reads back what VML runs).
     "vml": {"MKL_VML_DEBUG_CPU_TYPE": "1"},
     # The one float32 BLAS product of a policy's inference, the spatial softmax's expected keypoint
     # coordinates (softvt_campaign/baselines/networks.py), done as ATen's reduction, not MKL's GEMV:
