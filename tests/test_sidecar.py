@@ -43,7 +43,7 @@ def test_a_table_of_files_from_two_machines_says_what_its_rows_may_compare():
     before = [{"receipt": {"stack": s, "numerics": {**pinned, "parts": [p for p in N.PARTS if p != "vml"]}}}
               for s in (EPYC, {"cpu": "Intel(R) Xeon(R) Processor"})]
     assert "not their records" in P.crossing_note([(P.machine(before), P.numerics(before))])
-    assert "cross numerics" in P.crossing_note([(P.machine(full), P.numerics(full)), (P.machine(before), P.numerics(before))])
+    assert "and numerics (x86-64-v3; " in P.crossing_note([(P.machine(full), P.numerics(full)), (P.machine(before), P.numerics(before))])
 
 
 def test_the_committed_sidecars_name_every_file_that_does_not_name_its_machine():

@@ -65,8 +65,9 @@ def crossing_note(rows: list[tuple[str, str]]) -> str | None:
     kinds = {one.removesuffix(" (per sidecar)").split(" (")[0] for m, _ in rows for one in m.split("; ")}
     names = {one.removesuffix(" (per sidecar)") for _, x in rows for one in x.split("; ")}
     if len(names) > 1:
-        return (f"These rows cross numerics ({'; '.join(sorted(names))}): compare their rates, not their "
-                "records (docs/install.md, numerics).")
+        machines = f"machines ({'; '.join(sorted(kinds))}) and " if len(kinds) > 1 else ""
+        return (f"These rows cross {machines}numerics ({'; '.join(sorted(names))}): compare their rates, not "
+                "their records (docs/install.md, numerics).")
     if len(kinds) < 2:
         return None
     if names == {PINNED} and "unrecorded" not in kinds:
