@@ -109,6 +109,7 @@ def test_a_fresh_checkout_records_the_accepted_episodes_its_committed_qc_log_lis
         format_stats(summary) + "\n"
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_screening_grows_the_qc_log_without_recording_again_what_it_lists(tmp_path):
     """generate --screen-only (a set grown over sessions on machines that keep nothing): an accepted
     seed the committed log lists is not recorded again, the next seed is drawn and recorded, nothing
@@ -314,6 +315,7 @@ def test_replay_renders_observations_on_the_same_timeline(dataset, tmp_path):
         assert not any("evaluator" in n or "soft" in n.split("/")[-1] for n in names)
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_rigid_twins_touch_renders_from_its_stored_states_as_the_live_episode_showed_it(tmp_path):
     """PhysX computes contacts only when it steps, so a restored state has none: the twins' contact
     wrenches are part of the env state, and a rendering shows the pinch the live episode showed.

@@ -189,7 +189,8 @@ def test_replay_converts_into_every_control_mode(mp_demo, tmp_path, mode):
 
 @pytest.mark.parametrize("env_id,obs_mode", [(RIGID, "state"), pytest.param(RIGID, "state_dict", marks=pytest.mark.slow),
                                              pytest.param(RIGID, "rgb", marks=pytest.mark.slow),
-                                             (RIGID, "rgb+tactile"), ("SoftVTObjectSoft-v1", "rgb+tactile")])
+                                             pytest.param(RIGID, "rgb+tactile", marks=pytest.mark.slow),  # the soft one runs by default
+                                             ("SoftVTObjectSoft-v1", "rgb+tactile")])
 def test_record_episode_records_flushes_and_saves_video(tmp_path, env_id, obs_mode):
     from mani_skill.utils.wrappers.record import RecordEpisode
 
@@ -384,7 +385,7 @@ def test_motionplanning_refuses_bad_input_before_it_plans(tmp_path, capsys):
         assert why in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("obs_mode", ["rgb", "state"])
+@pytest.mark.parametrize("obs_mode", [pytest.param("rgb", marks=pytest.mark.slow), "state"])  # 10-minute budget
 def test_a_maniskill_checkpoint_sees_what_the_baselines_eval_env_shows_it(obs_mode):
     # ManiSkillDiffusionPolicy flattens the evaluator's observation as the baseline's evaluation env
     # does (FlattenRGBDObservationWrapper in rgb, the flat state in state).

@@ -215,6 +215,7 @@ def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under
     assert N.vml_cpu_type() == 1 == N.resolved()["mkl_vml_cpu_type"], "MKL's vector maths run other kernels than the pins'"
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_records_of_the_pins_before_vml_replay_under_them_and_a_policys_per_vendor():
     """A record of the full pins before 2026-12-06 names parts without ``vml``: it is read as those pins
     with VML's own detection (``vml-detect``, the variable set empty, which MKL reads as no override,

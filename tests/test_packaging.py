@@ -180,6 +180,7 @@ def test_missing_cards_name_the_directory_the_variable_and_the_remedy(tmp_path, 
         assert "build" not in message and "calibrate" not in message, message
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_an_old_command_path_runs_the_command_and_says_where_it_moved():
     """``python -m mani_skill_softvt.compare`` (an old path, one release) runs ``cli.compare`` and
     names the new path on stderr; the paths README keeps (``.evaluate``) print no such note."""
