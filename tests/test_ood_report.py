@@ -79,6 +79,9 @@ def test_twins_from_the_ood_machine_replace_the_committed_ones(tmp_path):
     v = result["variants"]["vo-c,cpu"]
     assert v["paired_tsr"]["difference"] == pytest.approx(1.0) and v["id"]["tsr"] == 1.0
     assert v["stiffness"][1.0]["tsr"] == 0.0  # x1.0 is the twins the OOD episodes pair with
+    # The report ends with where each file ran, the twins by their folder.
+    where = (tmp_path / "out" / "ood.md").read_text().split("## Where the records ran")[1]
+    assert "| object_soft_ood_vo-c-cpu.jsonl | unrecorded |" in where and "| twins/object_soft_id_vo-c-cpu.jsonl |" in where
     with pytest.raises(SystemExit):
         O.main([str(tmp_path / "object_soft_ood_vo-c-cpu.jsonl"), "--out", str(tmp_path / "out"),
                 "--twins", str(tmp_path / "nowhere")])

@@ -63,7 +63,7 @@ def crossing_note(rows: list[tuple[str, str]]) -> str | None:
     AVX-512), so crossing machines leaves records comparable; under anything else the same episode
     may round differently on another kind, and only rates compare."""
     kinds = {one.removesuffix(" (per sidecar)").split(" (")[0] for m, _ in rows for one in m.split("; ")}
-    names = {one.removesuffix(" (per sidecar)") for _, x in rows for one in x.split("; ")}
+    names = {one.removesuffix(" (per sidecar)").removesuffix(" (before the pins)") for _, x in rows for one in x.split("; ")}
     if len(names) > 1:
         machines = f"machines ({'; '.join(sorted(kinds))}) and " if len(kinds) > 1 else ""
         return (f"These rows cross {machines}numerics ({'; '.join(sorted(names))}): compare their rates, not "

@@ -20,9 +20,11 @@ McNemar) on those twins, beside the paper's Delta against its full ID entry. Wri
 A run still in progress is reported as it stands: each row says how many episodes it holds.
 
 ``--twins DIR`` reads the ID twins from ``DIR/<suite>_id_<policy>.jsonl`` instead: the ID
-episodes run again on the machine and stack the OOD episodes ran on. A learned policy's closed loop
-amplifies another machine's rounding into other episodes (docs/install.md), so episodes pair best
-with twins from their own machine; the change against all ID episodes stays a change of rates.
+episodes run again on the machine and stack the OOD episodes ran on. Under numerics whose bits
+depend on the CPU, a learned policy's closed loop amplifies another machine's rounding into other
+episodes (docs/install.md), so episodes pair best with twins from their own machine; under today's
+full pins a twin is the same episode on any x86-64 machine. The report ends with where each file's
+records ran, and says what its rows may compare when they cross machines or numerics.
 """
 
 from __future__ import annotations
@@ -39,9 +41,10 @@ from mani_skill_softvt.evaluation.records import read_records
 from mani_skill_softvt.evaluation.protocols import episode_key, scene_key
 from mani_skill_softvt.evaluation.seed_level import clustered_difference
 from mani_skill_softvt.evaluation.runner import single_run
+from mani_skill_softvt.evaluation.sidecar import sidecar
 from mani_skill_softvt.fileio import atomic_write, atomic_write_json
 from mani_skill_softvt.tasks.suites import OOD_CONDITIONS, PhysicalFactors
-from .results import variant_of
+from .results import provenance_lines, variant_of
 
 # The paper's per-condition OOD table for Diffusion Policy, by soft suite (TSR, DSR %; 100 episodes each;
 # its light levels x0.5, x1.33, x2.0 are ours at 67.5, 180, 270), and its pooled OOD row with the change
@@ -375,7 +378,10 @@ def main(argv=None) -> dict:
     except ValueError as e:
         ap.error(str(e))
     result = analyse(runs, twins_from)
-    text = build(result)
+    twin_files = [args.twins / p.name.replace("_ood_", "_id_") for p in args.ood] if args.twins else []
+    files = [(str(p.relative_to(p.parent.parent) if p in twin_files else p.name), read_records(p), sidecar(p))
+             for p in [*args.ood, *(q for q in twin_files if q.is_file())]]
+    text = build(result) + "\n".join(["", "## Where the records ran", *provenance_lines(files)]) + "\n"
     atomic_write(args.out / "ood.md", lambda p: p.write_text(text))
     atomic_write_json(args.out / "ood.json", result)
     plot_curves(runs, args.out / "ood_curves.png", twins_from)
