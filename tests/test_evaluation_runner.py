@@ -57,11 +57,12 @@ def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, sof
     edited["record_sha256"] = record_hash(edited)
     path = tmp_path / "object_soft_id_expert.jsonl"
     path.write_text(json.dumps(edited) + "\n")
-    with pytest.raises(SystemExit):  # --tasks picks among the file's tasks, and says so when it has none of them
-        evaluate_cli.main(["--reproduce", str(path), "--tasks", "0", "1"])
-    assert "holds no records of tasks [0, 1] (it has [3])" in capsys.readouterr().err
+    for tasks, why in ((["3", "4"], "holds no records of tasks [4] (it has [3])"), (["x"], "task ids must be in [0, 9]")):
+        with pytest.raises(SystemExit):  # --tasks picks among the file's tasks, and names one it lacks
+            evaluate_cli.main(["--reproduce", str(path), "--tasks", *tasks])
+        assert why in capsys.readouterr().err
     with pytest.raises(SystemExit) as stop:
-        evaluate_cli.main(["--reproduce", str(path), "--tasks", "3"])
+        evaluate_cli.main(["--reproduce", str(path)])
     assert stop.value.code == 1
     out = capsys.readouterr().out
     assert "task 3 id" in out and "differs in r_max (by at most" in out and "0 of 1 episodes" in out

@@ -21,29 +21,52 @@ def test_a_sidecar_entry_fills_in_what_a_file_does_not_say(tmp_path):
     assert P.numerics(stackless, entry) == "x86-64-v3:openblas (per sidecar)"
     assert P.numerics(stackless) == "native (before the pins)"
     # A record's own stack wins over the sidecar.
-    named = [{"receipt": {"stack": EPYC, "numerics": {"name": "x86-64-v3", "parts": list(N.PARTS)}}}]
+    named = [{"receipt": {"stack": EPYC, "numerics": {"name": "x86-64-v3", "parts": list(N.PARTS), "pinned": True}}}]
     assert P.machine(named, {"cpu": "other"}) == "AMD EPYC (avx512_bf16 avx512f avx2 fma)"
     assert P.numerics(named, entry) == "x86-64-v3"
     assert N.numerics_of(stackless[0], entry) == "x86-64-v3:openblas" and N.numerics_of(stackless[0]) == "native"
     assert "AMD EPYC (its instruction set unrecorded)" in N.reproduction_note(stackless[0], EPYC, entry)
 
 
+def _file(*stacks, **numerics):
+    """A records file's (machine, numerics) as the reports read them: one record per stack."""
+    recs = [{"receipt": {"stack": st, **({"numerics": numerics} if numerics else {})}} for st in stacks]
+    return P.machine(recs), P.numerics(recs)
+
+
 def test_a_table_of_files_from_two_machines_says_what_its_rows_may_compare():
-    xeon = [{"receipt": {"stack": {"cpu": "Intel(R) Xeon(R) Processor"}}}]
-    epyc = [{"receipt": {"stack": EPYC}}]
-    text = "\n".join(provenance_lines([("a.jsonl", epyc, None), ("b.jsonl", xeon, None)]))
-    assert "cross machines" in text and "not their records" in text and "| a.jsonl | AMD EPYC" in text
-    assert "cross" not in "\n".join(provenance_lines([("a.jsonl", epyc, None), ("c.jsonl", epyc, None)]))
-    # Under today's full pins a record keeps its bits across vendors (the goldens): records compare.
-    pinned = {"name": N.PINNED, "parts": list(N.PARTS)}
-    full = [{"receipt": {"stack": s, "numerics": pinned}} for s in (EPYC, {"cpu": "Intel(R) Xeon(R) Processor"})]
-    note = P.crossing_note([(P.machine(full), P.numerics(full))])  # one file resumed on the other vendor
-    assert "cross machines (AMD EPYC; Intel(R) Xeon(R) Processor)" in note and "their records compare" in note
+    xeon = {"cpu": "Intel(R) Xeon(R) Processor"}
+    epyc2 = {"cpu": "AMD EPYC", "cpu-isa": "AVX2 avx2 fma"}
+    full = {"name": N.PINNED, "parts": list(N.PARTS), "pinned": True}
+    before_vml = {**full, "parts": [p for p in N.PARTS if p != "vml"]}
+    rates_only, records_too = "not their records", "their records compare"
+    # Before the pins: two CPU models, or one model with other instruction sets, round differently.
+    assert rates_only in P.crossing_note([_file(EPYC), _file(xeon)])
+    assert rates_only in P.crossing_note([_file(EPYC), _file(epyc2)])
+    assert P.crossing_note([_file(EPYC), _file(EPYC)]) is None
+    text = "\n".join(provenance_lines([("a.jsonl", [{"receipt": {"stack": EPYC}}], None),
+                                        ("b.jsonl", [{"receipt": {"stack": xeon}}], None)]))
+    assert "| a.jsonl | AMD EPYC" in text and rates_only in text
+    # A pre-pin AMD file reads as what that machine ran natively, the same as a sidecar saying so: one numerics.
+    assert P.numerics([{"receipt": {"stack": EPYC}}]) == "x86-64-v3:openblas (before the pins)"
+    note = P.crossing_note([_file(EPYC), ("AMD EPYC (per sidecar)", "x86-64-v3:openblas (per sidecar)")])
+    assert "and numerics" not in note and "cross numerics" not in note  # (a sidecar names no flags: which EPYC is unknown)
+    # Under today's full pins a record keeps its bits across vendors (the goldens): records compare, also
+    # within one file resumed on another machine.
+    assert records_too in P.crossing_note([_file(EPYC, xeon, **full)])
+    assert P.crossing_note([_file(EPYC, **full), _file(epyc2, **full)]) is None  # one model; flags cannot matter
+    assert P.crossing_note([_file(xeon, **full), _file(xeon, **full)]) is None
+    # Today's name with a part released or a library loaded before the pins is not the full pins.
+    released = {**full, "pinned": False, "released": ["onednn"]}
+    assert _file(xeon, **released)[1] == "x86-64-v3 (not in effect)"
+    assert rates_only in P.crossing_note([_file(EPYC, xeon, **released)])
     # The pins before vml kept a policy's bits on its vendor only; two numerics never compare records.
-    before = [{"receipt": {"stack": s, "numerics": {**pinned, "parts": [p for p in N.PARTS if p != "vml"]}}}
-              for s in (EPYC, {"cpu": "Intel(R) Xeon(R) Processor"})]
-    assert "not their records" in P.crossing_note([(P.machine(before), P.numerics(before))])
-    assert "and numerics (x86-64-v3; " in P.crossing_note([(P.machine(full), P.numerics(full)), (P.machine(before), P.numerics(before))])
+    assert rates_only in P.crossing_note([_file(EPYC, xeon, **before_vml)])
+    assert "and numerics" in P.crossing_note([_file(EPYC, **full), _file(xeon, **before_vml)])
+    # Where a file does not name its machine, nothing says the rows share one.
+    assert rates_only in P.crossing_note([("unrecorded", "native (before the pins)"), _file(EPYC)[:1] + ("native",)])
+    assert rates_only in P.crossing_note([("unrecorded", "native (before the pins)")] * 2)
+    assert P.crossing_note([("unrecorded", "native (before the pins)")]) is None  # one file: nothing to compare
 
 
 def test_the_committed_sidecars_name_every_file_that_does_not_name_its_machine():

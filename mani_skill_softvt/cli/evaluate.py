@@ -30,7 +30,7 @@ from ..evaluation.protocols import PROTOCOLS
 from ..evaluation.sidecar import sidecar
 from ..evaluation.records import RecordIntegrityError, read_records
 from ..evaluation.report import plot_ood_curves, plot_traces, write_report
-from ..evaluation.run import DEFAULT_TASKS, RunConfig
+from ..evaluation.run import DEFAULT_TASKS, RunConfig, task_ids
 from ..evaluation.runner import evaluate, recorded_obs_modes, relative_difference, reproduce, run_records
 from ..evaluation.videos import record_episode_video, video_name
 from ..contracts.observations import CameraSize
@@ -152,12 +152,9 @@ def main(argv=None) -> dict:
 def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: int, tasks: list[str] | None) -> dict:
     if not Path(path).is_file():
         ap.error(f"--reproduce: {path} does not exist")
-    if tasks not in (None, ["all"]) and not all(t.isdigit() for t in tasks):
-        ap.error(f"--tasks {' '.join(tasks)}: give task ids (0-9) or 'all'")
     bar = tqdm(desc=f"reproduce {Path(path).name}", unit="episode")
     try:
-        results = reproduce(path, per_task, workers, progress=bar.update,
-                            tasks=None if tasks in (None, ["all"]) else tuple(int(t) for t in tasks))
+        results = reproduce(path, per_task, workers, progress=bar.update, tasks=None if tasks is None else task_ids(tasks))
     except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
         ap.error(str(e))
     bar.close()

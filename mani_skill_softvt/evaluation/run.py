@@ -49,6 +49,19 @@ def recorded_camera_size(obs_mode: str, camera_size: tuple[int, int] | None) -> 
     return [int(v) for v in (camera_size or NATIVE_CAMERA_SIZE)] if ObsMode.parse(obs_mode).images else None
 
 
+def task_ids(tasks) -> tuple[int, ...]:
+    """Task ids as a command takes them (``all``, or ids as numbers or strings), checked against the suites'."""
+    if tasks in ("all", ["all"], ("all",)):
+        return tuple(range(NUM_TASKS))
+    try:
+        ids = tuple(int(t) for t in tasks)
+    except (TypeError, ValueError):
+        ids = ()
+    if not ids or any(not 0 <= t < NUM_TASKS for t in ids):
+        raise ValueError(f"task ids must be in [0, {NUM_TASKS - 1}] or 'all', got {list(tasks)}")
+    return ids
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """One evaluation run (module docstring). Build it with :meth:`resolve`."""
@@ -104,9 +117,7 @@ class RunConfig:
             raise ValueError(f"policy {spec} learned from tactile frames of model {source.tactile_model}, and suite "
                              f"{suite} renders model {frames}: evaluate it on a suite of its model, or train one "
                              f"on {suite}'s demos")
-        tasks = tuple(range(NUM_TASKS)) if tasks in ("all", ["all"], ("all",)) else tuple(int(t) for t in tasks)
-        if not tasks or any(not 0 <= t < NUM_TASKS for t in tasks):
-            raise ValueError(f"task ids must be in [0, {NUM_TASKS - 1}], got {list(tasks)}")
+        tasks = task_ids(tasks)
         if int(episodes_per_task) < 1:
             raise ValueError(f"episodes per task must be >= 1 (the protocol has {ID_EPISODES_PER_TASK} a task), "
                              f"got {episodes_per_task}")

@@ -328,9 +328,10 @@ def reproduce(path: Path, per_task: int | None = 1, workers: int = 1, progress=N
     size = first.get("camera_size")
     run = RunConfig.resolve(spec, first["obs_mode"], first["control_mode"], tuple(size) if size else None,
                             suite=first["suite"], protocol=protocol_of(first["condition"]))
-    if tasks is not None and not {r["task_id"] for r in records} & set(tasks):
-        raise ValueError(f"{path}: holds no records of tasks {list(tasks)} (it has "
-                         f"{sorted({r['task_id'] for r in records})}); name tasks it has, or leave --tasks out")
+    missing = sorted(set(tasks or ()) - {r["task_id"] for r in records})
+    if missing:
+        raise ValueError(f"{path}: holds no records of tasks {missing} (it has {sorted({r['task_id'] for r in records})}); "
+                         "name only tasks it holds, or none to reproduce every task")
     chosen, count = [], defaultdict(int)
     for r in records:
         key = (r["suite"], r["task_id"])

@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..fileio import read_json
-from ..provenance.numerics import PINNED, machine_kind, numerics_of
+from ..provenance.numerics import PINNED, machine_kind, numerics_of, pinned_in_full
 
 PROVENANCE_FILE = "provenance.json"
 
@@ -46,11 +46,21 @@ def machine(records: list[dict], entry: dict | None = None) -> str:
 
 
 def numerics(records: list[dict], entry: dict | None = None) -> str:
-    """The numerics a file's records name, else the sidecar's, else ``native (before the pins)``."""
-    # numerics_of: records of the earlier pins carry today's name; their MKL variable or lack of parts tells them apart.
-    named = {numerics_of(r) for r in records if (r.get("receipt") or {}).get("numerics")}
-    if named:
-        return "; ".join(sorted(named))
+    """The numerics a file's records name (today's name marked ``not in effect`` where a part was released
+    or a library loaded before the pins), else the sidecar's (``per sidecar``), else what the machine a
+    record names ran natively before the pins (``before the pins``; ``native`` where unknown)."""
+    labels = set()
+    for r in records:
+        if (r.get("receipt") or {}).get("numerics"):
+            # numerics_of: records of the earlier pins carry today's name; their MKL variable or lack of parts tells them apart.
+            name = numerics_of(r)
+            labels.add(f"{name} (not in effect)" if name == PINNED and not pinned_in_full(r) else name)
+        elif entry and entry.get("numerics"):
+            labels.add(f"{entry['numerics']} (per sidecar)")
+        else:
+            labels.add(f"{numerics_of(r)} (before the pins)")
+    if labels:
+        return "; ".join(sorted(labels))
     if entry and entry.get("numerics"):
         return f"{entry['numerics']} (per sidecar)"
     return "native (before the pins)"
@@ -59,19 +69,29 @@ def numerics(records: list[dict], entry: dict | None = None) -> str:
 def crossing_note(rows: list[tuple[str, str]]) -> str | None:
     """What a table over records files may compare, given each file's (:func:`machine`, :func:`numerics`):
     None where they share one machine kind and one numerics. Under today's full pins a record keeps
-    its bits on any x86-64 machine (the goldens pass on Intel Xeons and on AMD EPYCs with and without
-    AVX-512), so crossing machines leaves records comparable; under anything else the same episode
-    may round differently on another kind, and only rates compare."""
-    kinds = {one.removesuffix(" (per sidecar)").split(" (")[0] for m, _ in rows for one in m.split("; ")}
-    names = {one.removesuffix(" (per sidecar)").removesuffix(" (before the pins)") for _, x in rows for one in x.split("; ")}
+    its bits on any x86-64 machine (its goldens passed on an Intel Xeon and an AVX2-only AMD EPYC;
+    docs/install.md), so crossing machines leaves records comparable. Under anything else the same
+    episode may round differently on another CPU model or instruction set (the flags are part of
+    the kind then), and only rates compare; so too where a machine is not recorded."""
+    def label(text: str) -> str:
+        return text.removesuffix(" (per sidecar)").removesuffix(" (before the pins)")
+
+    models = {label(one).split(" (")[0] for m, _ in rows for one in m.split("; ")}
+    kinds = {label(one) for m, _ in rows for one in m.split("; ")}
+    names = {label(one) for _, x in rows for one in x.split("; ")}
     if len(names) > 1:
         machines = f"machines ({'; '.join(sorted(kinds))}) and " if len(kinds) > 1 else ""
         return (f"These rows cross {machines}numerics ({'; '.join(sorted(names))}): compare their rates, not "
                 "their records (docs/install.md, numerics).")
+    if names == {PINNED}:
+        return None if len(models) < 2 else (
+            f"These rows cross machines ({'; '.join(sorted(models))}) under the full pins ({PINNED}), which give "
+            "the same bits on any x86-64 machine: their records compare too (docs/install.md, numerics).")
+    if "unrecorded" in kinds and len(rows) > 1:
+        return (f"Not every file of these rows names its machine ({'; '.join(sorted(kinds))}), under numerics "
+                f"({next(iter(names))}) whose bits depend on the CPU: compare their rates, not their records "
+                "(docs/install.md, numerics).")
     if len(kinds) < 2:
         return None
-    if names == {PINNED} and "unrecorded" not in kinds:
-        return (f"These rows cross machines ({'; '.join(sorted(kinds))}) under the full pins ({PINNED}), which "
-                "give the same bits on any x86-64 machine: their records compare too (docs/install.md, numerics).")
-    return (f"These rows cross machines ({'; '.join(sorted(kinds))}) under numerics whose bits depend on the "
-            "CPU: compare their rates, not their records (docs/install.md, numerics).")
+    return (f"These rows cross machines ({'; '.join(sorted(kinds))}) under numerics ({next(iter(names))}) whose bits "
+            "depend on the CPU: compare their rates, not their records (docs/install.md, numerics).")

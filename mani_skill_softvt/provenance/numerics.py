@@ -349,6 +349,13 @@ def machine_kind(stack: dict) -> tuple[str | None, tuple[str, ...]]:
     return stack.get("cpu"), tuple(w for w in isa[1:] if not w.startswith("onednn_max="))
 
 
+def pinned_in_full(record: dict) -> bool:
+    """Whether ``record`` was made under today's pins with every part in effect (none released, nothing
+    loaded before them): its bits hold on any x86-64 machine."""
+    numerics = (record.get("receipt") or {}).get("numerics")
+    return bool(numerics and numerics.get("pinned") and numerics_of(record) == PINNED)
+
+
 def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> str | None:
     """What a reproduction of ``record`` on a machine of ``stack`` (:func:`mani_skill_softvt.provenance.stack.software_stack`)
     should be told about its numerics: None when its numerics are pinned in full (they hold on any
@@ -356,7 +363,7 @@ def reproduction_note(record: dict, stack: dict, known: dict | None = None) -> s
     vendor) that made it (``known``: its file's provenance sidecar entry, for a record that does not
     name its machine)."""
     numerics = (record.get("receipt") or {}).get("numerics")
-    if numerics and numerics.get("pinned") and numerics_of(record) == PINNED:
+    if pinned_in_full(record):
         return None
     earlier = numerics_of(record) if numerics else None
     # The earlier pins, all but a vendor-dependent MKL path, where every part took effect (a record that

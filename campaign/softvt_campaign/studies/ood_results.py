@@ -378,9 +378,13 @@ def main(argv=None) -> dict:
     except ValueError as e:
         ap.error(str(e))
     result = analyse(runs, twins_from)
-    twin_files = [args.twins / p.name.replace("_ood_", "_id_") for p in args.ood] if args.twins else []
-    files = [(str(p.relative_to(p.parent.parent) if p in twin_files else p.name), read_records(p), sidecar(p))
-             for p in [*args.ood, *(q for q in twin_files if q.is_file())]]
+    files = []  # where each file read ran: the OOD runs, the ID runs they are read against, the twins
+    for path, (variant, (ood, id_records)) in zip(args.ood, runs.items()):  # load_runs keeps the files' order
+        id_path = path.with_name(path.name.replace("_ood_", "_id_"))
+        files += [(path.name, ood, sidecar(path)), (id_path.name, id_records, sidecar(id_path))]
+        if variant in twins_from:
+            twin_path = args.twins / id_path.name
+            files.append((f"{args.twins.name}/{id_path.name}", twins_from[variant], sidecar(twin_path)))
     text = build(result) + "\n".join(["", "## Where the records ran", *provenance_lines(files)]) + "\n"
     atomic_write(args.out / "ood.md", lambda p: p.write_text(text))
     atomic_write_json(args.out / "ood.json", result)
