@@ -54,7 +54,8 @@ def main(argv=None) -> dict:
                          "needs an obs mode with rgb: rgb, rgbd, each +tactile) | PATH/policy.pt (a trained Diffusion Policy "
                          "baseline, softvt-train)")
     ap.add_argument("--tasks", nargs="+", default=None,
-                    help=f"task ids, or 'all' (default {' '.join(map(str, DEFAULT_TASKS))}; with --reproduce, every task of the file)")
+                    help=f"task ids, or 'all' (default {' '.join(map(str, DEFAULT_TASKS))}; with --reproduce, default and 'all' are "
+                         "every task the file holds)")
     ap.add_argument("--episodes-per-task", type=int, default=None, help="default 1")
     ap.add_argument("--conditions", nargs="+", default=None, help="OOD conditions (default: all nine)")
     ap.add_argument("--obs-mode", default=None,
@@ -154,7 +155,7 @@ def _reproduce(ap: argparse.ArgumentParser, path: Path, per_task: int, workers: 
         ap.error(f"--reproduce: {path} does not exist")
     bar = tqdm(desc=f"reproduce {Path(path).name}", unit="episode")
     try:
-        results = reproduce(path, per_task, workers, progress=bar.update, tasks=None if tasks is None else task_ids(tasks))
+        results = reproduce(path, per_task, workers, progress=bar.update, tasks=None if tasks in (None, ["all"]) else task_ids(tasks))
     except (ValueError, RecordIntegrityError, FileNotFoundError) as e:
         ap.error(str(e))
     bar.close()
