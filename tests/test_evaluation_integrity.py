@@ -84,28 +84,25 @@ def test_a_blow_up_ends_the_episode_as_sim_unstable_and_the_env_runs_on(cube_env
     assert hold["r_max"] < 0.1 and hold["collapsed_steps"] == 0  # nothing touched the object: only settling
 
 
-@pytest.mark.parametrize("with_crush", [pytest.param(False, id="without-crush"),
-                                        pytest.param(True, id="with-crush", marks=pytest.mark.slow)])
-def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_path, monkeypatch, with_crush):
+@pytest.mark.slow  # in CI's slow pass: the crushing episode alone is about 2 min of FEM
+def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_path, monkeypatch):
     """One evaluation run through the runner's worker, one misbehaviour an episode. The crushing
-    episode simulates on to the protocol's step limit (about 2 min of FEM), so the default run
-    leaves it to the crushing test above (the same ``run_episode`` on a 40-step env) and the slow
-    run adds it here."""
+    episode simulates on to the protocol's step limit, so the default run keeps the crushing and
+    blow-up tests above (the same ``run_episode`` on a 40-step env) and the served policy's failures
+    (tests/test_remote_policy.py)."""
     assert BEHAVIOURS[-1] == "crush"
-    behaviours = BEHAVIOURS if with_crush else BEHAVIOURS[:-1]
-    if with_crush:
-        crush_seed = id_seed(TASK, BEHAVIOURS.index("crush"))
-        monkeypatch.setenv(CRUSH_TARGET_ENV, ",".join(repr(float(v)) for v in _target_top(cube_env, crush_seed)))
-    eps = episodes("object_soft", "id", tasks=[TASK], per_task=len(behaviours))
+    crush_seed = id_seed(TASK, BEHAVIOURS.index("crush"))
+    monkeypatch.setenv(CRUSH_TARGET_ENV, ",".join(repr(float(v)) for v in _target_top(cube_env, crush_seed)))
+    eps = episodes("object_soft", "id", tasks=[TASK], per_task=len(BEHAVIOURS))
     out = tmp_path / "misbehaving.jsonl"
     records = evaluate(RunConfig.resolve(SPEC), out, eps)
     assert [r["seed"] for r in records] == [e["seed"] for e in eps]
-    got = {b: r for b, r in zip(behaviours, records)}
+    got = dict(zip(BEHAVIOURS, records))
     expected = {"raise_in_act": ("policy_error", "ZeroDivisionError in policy.act(): deliberate failure in act"),
                 "nan": ("policy_error", "NaN"), "wrong_shape": ("policy_error", "shape (6,)"),
                 "strings": ("policy_error", "must be numbers"), "kill_own_process": ("worker_died", "SIGKILL"),
                 "raise_in_reset": ("policy_error", "KeyError in policy.reset()"), "crush": ("timeout", None)}
-    for b in behaviours:
+    for b in BEHAVIOURS:
         termination, message = expected[b]
         r = got[b]
         assert r["termination"] == termination and (message is None) == (r["error"] is None), (b, r["termination"])
@@ -117,9 +114,9 @@ def test_every_misbehaviour_ends_in_a_record_and_the_run_goes_on(cube_env, tmp_p
     assert got["raise_in_act"]["steps"] == got["nan"]["steps"] == 2 and got["raise_in_reset"]["steps"] == 0
     assert got["kill_own_process"]["r_max"] is None  # nothing of a dead worker's episode survives
     s = summarize(records)
-    assert s["terminations"] == {"policy_error": 5, "worker_died": 1, **({"timeout": 1} if with_crush else {})}
-    assert s["tolerance_violations"] == s["collapses"] == int(with_crush)
-    assert not with_crush or got["crush"]["collapsed_steps"] > 0
+    assert s["terminations"] == {"policy_error": 5, "worker_died": 1, "timeout": 1}
+    assert s["tolerance_violations"] == s["collapses"] == 1
+    assert got["crush"]["collapsed_steps"] > 0
     assert s["tsr"] == s["dsr"] == 0.0
 
     # Resume: nothing re-runs; every line is verified.

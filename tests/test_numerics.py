@@ -77,6 +77,7 @@ def test_the_package_import_pinned_this_process_and_every_library_took_it():
     assert got["openblas_core"] == "Haswell"
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch):
     (pinned,) = [v for k, v in run_tasks(_pinned_variables, [()], 1) if k == "result"]
     assert pinned == ("x86-64-v3", {"ATEN_CPU_CAPABILITY": "avx2", "OPENBLAS_CORETYPE": "Haswell"}, "AVX2")
@@ -191,6 +192,7 @@ def _vml_kernels(kind: str) -> dict[str, str]:
     return out
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the goldens below catch what it would explain)
 def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under_the_pins():
     """MKL's vector maths (VML), which torch's float32 exp, sin, cos and square roots call, ignores
     MKL_CBWR=COMPATIBLE: it ran its SSE4.2 kernels, whose square root starts from rsqrtps, an
@@ -318,6 +320,7 @@ def test_a_committed_policys_action_chunk_is_the_golden_one():
     _same("dp_inference", DP.dp_inference())
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the policy's action chunk keeps a golden in the default run)
 def test_training_a_small_diffusion_policy_gives_the_golden_weights():
     got = DP.dp_training()
     _same("dp_training", got, ("losses", "weights", "episode"))
@@ -328,6 +331,7 @@ def test_an_expert_episode_is_the_golden_one(case):
     _same(case, F.CASES[case](), ("states", "rgb", "tactile", "episode"))
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (its two halves, the policy's action chunk and the rigid expert episode, have goldens of their own in the default run)
 def test_a_committed_policys_first_id_episode_is_the_golden_one():
     _same("record", F.CASES["record"](), ("steps", "r_max", "termination", "episode"))
 

@@ -37,6 +37,9 @@ def _events(ray_address, items, workers=2):
     return list(run_tasks(_square, items, workers, ray_address))
 
 
+# Both backends start worker processes that import the package (about 45 s of a default run on a
+# 2-core EPYC): CI's slow pass; test_parallel keeps a local worker pool in the default run.
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["local", "ray"])
 def test_every_item_runs_once_and_its_messages_come_before_its_result(backend, request):
     address = request.getfixturevalue("local_ray") if backend == "ray" else None
@@ -51,6 +54,7 @@ def test_every_item_runs_once_and_its_messages_come_before_its_result(backend, r
         assert at[(x, "start")] < at[(x, "end")] < at[x * x]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["local", "ray"])
 def test_a_failing_item_raises_its_error_after_its_messages(backend, request):
     address = request.getfixturevalue("local_ray") if backend == "ray" else None

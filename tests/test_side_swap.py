@@ -56,6 +56,7 @@ def test_agreement_tells_a_policy_that_reads_the_instruction_from_one_that_does_
         side_swap_agreement(ids + ids[:1], blind)
 
 
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_the_swapped_episode_starts_from_the_id_state_and_the_expert_carries_the_other_instance(tmp_path):
     env = make_env("spatial_rigid", 2, obs_mode="state_dict")
     try:
