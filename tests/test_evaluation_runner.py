@@ -45,7 +45,8 @@ def test_resume_after_a_kill_gives_the_uninterrupted_results(tmp_path, soft_cube
     json.dumps(full)  # records are plain JSON
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the resume test above reruns the same episode bit for bit)
+# The resume test above reruns the same episode bit for bit.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_reproduce_reruns_recorded_episodes_and_names_what_differs(tmp_path, soft_cube_expert_run, capsys):
     # The expert's episode run again gives the stored record bit for bit (all but the wall time);
     # a stored record that says another R_max (resealed, so it passes the audit) is named by field.

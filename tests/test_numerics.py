@@ -192,7 +192,8 @@ def _vml_kernels(kind: str) -> dict[str, str]:
     return out
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the goldens below catch what it would explain)
+# A VML kernel that differs across vendors shows in the goldens below, which stay in the default run.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_mkls_vector_maths_run_kernels_without_vendor_defined_instructions_under_the_pins():
     """MKL's vector maths (VML), which torch's float32 exp, sin, cos and square roots call, ignores
     MKL_CBWR=COMPATIBLE: it ran its SSE4.2 kernels, whose square root starts from rsqrtps, an
@@ -320,7 +321,8 @@ def test_a_committed_policys_action_chunk_is_the_golden_one():
     _same("dp_inference", DP.dp_inference())
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the policy's action chunk keeps a golden in the default run)
+# The policy's action chunk keeps a golden in the default run.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_training_a_small_diffusion_policy_gives_the_golden_weights():
     got = DP.dp_training()
     _same("dp_training", got, ("losses", "weights", "episode"))
@@ -331,7 +333,9 @@ def test_an_expert_episode_is_the_golden_one(case):
     _same(case, F.CASES[case](), ("states", "rgb", "tactile", "episode"))
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (its two halves, the policy's action chunk and the rigid expert episode, have goldens of their own in the default run)
+# Its two halves, the policy's action chunk and the rigid expert episode, keep goldens of their own
+# in the default run.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_committed_policys_first_id_episode_is_the_golden_one():
     _same("record", F.CASES["record"](), ("steps", "r_max", "termination", "episode"))
 

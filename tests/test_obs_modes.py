@@ -120,7 +120,8 @@ def test_depth_of_the_squeezed_soft_object_lies_on_its_drawn_fem_surface(squeeze
     assert from_rest.max() > 2 * DEPTH_QUANTUM, from_rest.max()
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the depth test above keeps the squeezed surface)
+# The depth test above keeps the squeezed surface.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_point_cloud_of_the_object_lies_on_its_drawn_surface_with_touch_beside_it(squeezed):
     env = gym.make("SoftVTObjectSoft-Task3-v1", obs_mode="pointcloud+tactile")
     env.reset(seed=3)

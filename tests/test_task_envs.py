@@ -400,7 +400,8 @@ def _first_difference(a: list[bytes], b: list[bytes]) -> int | None:
     return next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), None)
 
 
-@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget (the goldens keep an episode's bits in the default run)
+# The goldens keep an episode's bits in the default run.
+@pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_an_episode_is_the_same_bits_in_a_fresh_env_and_after_other_episodes():
     """An episode must not depend on what ran before it in the same env: the evaluator's resume
     and ``--reproduce`` run episodes in other orders. PhysX keeps contact state across a plain
