@@ -218,8 +218,8 @@ def test_pooled_ood_is_the_rate_over_the_nine_conditions_against_the_id_twins():
     runs = {"names": {"vo-c": "v"}, "runs": {"v": (ood, twins)}}
     pooled = SF.pooled_ood({**runs, "twins_from": {"v": twins}}, "vo-c")
     # TSR 9 of 18 = 50 %, DSR 3 of 18; each OOD episode against its own twin: twins' rates 50 / 50 %.
-    assert pooled == pytest.approx({"episodes": 18, "tsr": 50.0, "tsr_change": 0.0, "dsr": 100 / 6, "dsr_change": 100 / 6 - 50})
-    assert SF.ood_cell(pooled, "tsr") == "partial, 18 of 900: 50.0 (+0.0)"  # a run short of 900 says so
+    assert pooled == pytest.approx({"episodes": 18, "twins": 2, "tsr": 50.0, "tsr_change": 0.0, "dsr": 100 / 6, "dsr_change": 100 / 6 - 50})
+    assert SF.ood_cell(pooled, "tsr") == "partial, 18 of 900: 50.0 (+0.0 on 2 of 100 twins)"  # short runs say so
     assert SF.ood_cell(SF.pooled_ood(runs, "vo-c"), "dsr").endswith(": 16.7 (-)")  # twins not run yet
     assert SF.pooled_ood(runs, "vt-c") is None and SF.ood_cell(None, "tsr") == "not run"
     assert SF.ood_cell(SF.pooled_ood({"error": "x.jsonl: a record was edited"}, "vo-c"), "tsr").startswith("error")

@@ -210,7 +210,7 @@ def pooled_ood(ood: dict | None, key: str) -> dict | None:
     if key not in names:
         return None
     recs, twins = ood["runs"][names[key]][0], (ood.get("twins_from") or {}).get(names[key])
-    out = {"episodes": len(recs)}
+    out = {"episodes": len(recs), "twins": len(twins or [])}
     for name, outcome in (("tsr", "success"), ("dsr", "dsr_success")):
         out[name] = 100.0 * float(np.mean([bool(r[outcome]) for r in recs]))
         out[f"{name}_change"] = 100.0 * against_twins(recs, twins, outcome)["difference"] if twins else None
@@ -218,12 +218,17 @@ def pooled_ood(ood: dict | None, key: str) -> dict | None:
 
 
 def ood_cell(pooled: dict | None, outcome: str) -> str:
-    """``59.8 (-30.2)``; a run short of the protocol's episodes says so, as does one that could not be read."""
+    """``59.8 (-30.2)``; a run short of the protocol's episodes says so, as does a change read on part
+    of its ID twins (paired on the scenes they have) and a run that could not be read."""
     if pooled is None or "error" in pooled:
         return "not run" if pooled is None else "error (ood.md says)"
-    full = NUM_TASKS * OOD_PER_TASK * len(OOD_CONDITIONS)
+    full, scenes = NUM_TASKS * OOD_PER_TASK * len(OOD_CONDITIONS), NUM_TASKS * OOD_PER_TASK
     change = pooled[f"{outcome}_change"]
-    text = f"{pooled[outcome]:.1f} ({'-' if change is None else f'{change:+.1f}'})"
+    if change is None:
+        change_text = "-"
+    else:
+        change_text = f"{change:+.1f}" + (f" on {pooled['twins']} of {scenes} twins" if pooled["twins"] < scenes else "")
+    text = f"{pooled[outcome]:.1f} ({change_text})"
     return text if pooled["episodes"] >= full else f"partial, {pooled['episodes']} of {full}: {text}"
 
 
