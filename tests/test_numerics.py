@@ -77,6 +77,19 @@ def test_the_package_import_pinned_this_process_and_every_library_took_it():
     assert got["openblas_core"] == "Haswell"
 
 
+def test_a_library_loaded_before_the_pin_counts_only_where_its_variables_did_not_already_hold_it():
+    numerics = N.parse(N.PINNED)
+    pinned = numerics.environment()
+    # The shell's variables: NumPy and torch chose their kernels unpinned.
+    assert N.loaded_unpinned(["numpy", "torch"], {}, numerics) == ["numpy", "torch"]
+    # A Ray worker: its runtime_env set every pin before Ray imported NumPy.
+    assert N.loaded_unpinned(["numpy", "torch", "cv2"], pinned, numerics) == []
+    # One of NumPy's variables missing (OpenBLAS's kernel family): NumPy may have chosen otherwise.
+    assert N.loaded_unpinned(["numpy"], {k: v for k, v in pinned.items() if k != "OPENBLAS_CORETYPE"}, numerics) == ["numpy"]
+    # A part the choice does not pin cannot be missed.
+    assert N.loaded_unpinned(["numpy"], {}, N.parse(f"{N.PINNED}:warp")) == []
+
+
 @pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
 def test_a_worker_starts_pinned_and_a_native_reproduction_unpins_it(monkeypatch):
     (pinned,) = [v for k, v in run_tasks(_pinned_variables, [()], 1) if k == "result"]

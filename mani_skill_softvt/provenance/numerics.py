@@ -164,6 +164,8 @@ def chosen(environ=None) -> Numerics:
 # them too, and not the pins it inherited.
 ORIGINAL_ENV = "SOFTVT_NUMERICS_ORIGINAL"
 _ORIGINAL: dict[str, str | None] = {}
+# The libraries that read their dispatch variables as they load, and the parts whose variables they read.
+_READ_AT_LOAD = {"numpy": ("numpy", "openblas"), "torch": ("aten", "onednn", "mkl", "vml"), "cv2": ("opencv",)}
 _LOADED_BEFORE: list[str] = []  # libraries that read their dispatch as they load, loaded before pin()
 _RELEASED: set[str] = set()  # parts this process gave back to the library's own dispatch (release)
 
@@ -172,13 +174,22 @@ def _pinning_variables() -> list[str]:
     return sorted({v for part in _ALL_PARTS.values() for v in part})
 
 
+def loaded_unpinned(loaded: list[str], environ, numerics: Numerics) -> list[str]:
+    """Of the libraries ``loaded`` before :func:`pin`, those that may have read their dispatch under other
+    variables than ``numerics`` pins: a library loaded while ``environ`` already held its pins read them
+    (a Ray worker gets them from its runtime_env, then Ray itself imports NumPy before this package)."""
+    def held(part):
+        return all(environ.get(var) == value for var, value in _ALL_PARTS[part].items())
+    return [m for m in loaded if not all(held(p) for p in _READ_AT_LOAD[m] if p in numerics.parts)]
+
+
 def pin(environ=None) -> Numerics:
     """Set the variables of the chosen numerics in ``environ`` (default: this process's), overriding
     what was there (a record names its numerics, not the shell's), and return the choice."""
     environ = os.environ if environ is None else environ
     numerics = chosen(environ)
     if environ is os.environ and not _ORIGINAL:
-        _LOADED_BEFORE.extend(m for m in ("numpy", "torch", "cv2") if m in sys.modules)
+        _LOADED_BEFORE.extend(loaded_unpinned([m for m in _READ_AT_LOAD if m in sys.modules], environ, numerics))
     if ORIGINAL_ENV in environ:
         # A variable an older version's parent did not know was unset as far as can be told (its
         # value here may be that parent's pin).
