@@ -11,8 +11,9 @@ libraries load:
 
 - the package's import calls :func:`pin` first thing (``mani_skill_softvt/__init__.py``), so a
   command (``python -m mani_skill_softvt...``), and every worker process it spawns, is pinned;
-- Ray workers get the same variables through their ``runtime_env`` (:func:`environment`);
-- a process that loaded NumPy or torch before importing this package is pinned only in part:
+- Ray workers get the same variables through their ``runtime_env`` (:func:`environment`), set
+  before Ray itself loads NumPy there;
+- a process that loaded NumPy or torch before importing this package, without the variables, is pinned only in part:
   :func:`resolved` reads back what took effect, and that is what a record names.
 
 ``SOFTVT_NUMERICS`` chooses: ``x86-64-v3`` (the default), ``native`` (each library's own choice:
