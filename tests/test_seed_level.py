@@ -223,3 +223,8 @@ def test_pooled_ood_is_the_rate_over_the_nine_conditions_against_the_id_twins():
     assert SF.ood_cell(SF.pooled_ood(runs, "vo-c"), "dsr").endswith(": 16.7 (-)")  # twins not run yet
     assert SF.pooled_ood(runs, "vt-c") is None and SF.ood_cell(None, "tsr") == "not run"
     assert SF.ood_cell(SF.pooled_ood({"error": "x.jsonl: a record was edited"}, "vo-c"), "tsr").startswith("error")
+    # A VT-C run under way is shown in the table, never judged against VO-C's.
+    half = {"names": {"vo-c": "v", "vt-c": "t"}, "runs": {"v": (ood, twins), "t": (ood[:9], twins)}}
+    [claim] = SF.ood_claims(half, (("VT-C - VO-C, pooled OOD TSR", "tsr", 2.0),), {"tsr": (None, 0)})
+    assert claim["verdict"] == "unresolved" and claim["comparison"] is None
+    assert claim["why"] == "partial: VO-C 18 of 900, VT-C 9 of 900"
