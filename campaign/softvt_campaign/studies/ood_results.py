@@ -175,6 +175,13 @@ def analyse(runs: dict[str, tuple[list[dict], list[dict]]], twins_from: dict[str
     return out
 
 
+def legend_labels(runs: dict[str, tuple[list[dict], list[dict]]]) -> dict[str, str]:
+    """Each variant's name in a plot's legend: an Object-Soft variant's name carries no suite (the
+    tables' convention), so beside a Spatial-Soft run the legend adds it."""
+    both_suites = len({ood[0]["suite"] for ood, _ in runs.values()}) > 1
+    return {v: f"{v} ({ood[0]['suite']})" if both_suites and " (" not in v else v for v, (ood, _) in runs.items()}
+
+
 def paper_condition(suite: str, variant: str, condition: str) -> str:
     """The paper's Diffusion Policy TSR / DSR for ``variant`` on ``suite`` under ``condition``, or '-'."""
     paper = PAPER_DP_OOD.get(suite, {}).get(paper_key(variant), {}).get(condition)
@@ -301,6 +308,7 @@ def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
     nominal = PhysicalFactors()
     fig = Figure(figsize=(4.2 * len(factors), 6))
     axes = fig.subplots(2, len(factors), squeeze=False, sharey=True)
+    labels = legend_labels(runs)
     for col, (key, pts) in enumerate(factors.items()):
         for j, (variant, (ood, id_records)) in enumerate(runs.items()):
             twins = id_twins(ood, (twins_from or {}).get(variant, id_records))
@@ -312,8 +320,8 @@ def plot_curves(runs: dict[str, tuple[list[dict], list[dict]]], out: Path,
                     xs.append(value)
                     tsr.append(100 * s["tsr"])
                     dsr.append(100 * s["dsr"])
-            axes[0][col].plot(xs, tsr, "o-", color=f"C{j}", label=variant)
-            axes[1][col].plot(xs, dsr, "s--", color=f"C{j}", label=variant)
+            axes[0][col].plot(xs, tsr, "o-", color=f"C{j}", label=labels[variant])
+            axes[1][col].plot(xs, dsr, "s--", color=f"C{j}", label=labels[variant])
         axes[0][col].set_title(f"TSR against {key}", fontsize=9)
         axes[1][col].set_title(f"DSR against {key}", fontsize=9)
         axes[1][col].set_xlabel(key)
