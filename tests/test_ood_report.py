@@ -107,8 +107,9 @@ def test_both_soft_suites_in_one_report_each_beside_its_own_paper_entry(tmp_path
     assert "11.0 (-4.6) / 8.8 (-4.6)" in text and "25.2 (-7.8) / 17.8 (-7.2)" in text  # the paper's pooled Spatial-Soft rows
     assert all(len(O.PAPER_DP_OOD[s][v]) == len(OOD_CONDITIONS) for s in O.PAPER_DP_OOD for v in O.PAPER_DP_OOD[s])
     # The curves' legend names each line's suite once both are on the plot; one suite alone keeps the bare names.
-    assert set(O.legend_labels(runs).values()) == {"vo-c,cpu (object_soft)", "vt-c,cpu (object_soft)",
-                                                   "vo-c,cpu (spatial_soft)", "vt-c,cpu (spatial_soft)"}
+    assert O.legend_labels(runs) == {"vo-c,cpu": "vo-c,cpu (object_soft)", "vt-c,cpu": "vt-c,cpu (object_soft)",
+                                     "vo-c,cpu (spatial_soft)": "vo-c,cpu (spatial_soft)",
+                                     "vt-c,cpu (spatial_soft)": "vt-c,cpu (spatial_soft)"}
     object_only = {v: run for v, run in runs.items() if "(" not in v}
     assert O.legend_labels(object_only) == {"vo-c,cpu": "vo-c,cpu", "vt-c,cpu": "vt-c,cpu"}
 
