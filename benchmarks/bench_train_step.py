@@ -1,13 +1,19 @@
 """What a training step and a denoised chunk of the CPU Diffusion Policy baselines cost, by precision.
 
-    .venv/bin/python benchmarks/bench_train_step.py [--steps 20] [--threads 1] [--variants vo-c vt-c]
+    .venv/bin/python benchmarks/bench_train_step.py [--steps 20] [--threads 1] [--variants vo-c vt-c] [--release-onednn]
 
 For each variant (``cpu`` preset, batch 32, 84 px cameras) a full optimiser step of
 ``baselines.train.Training`` (random shift, encoders, U-Net loss, backward, AdamW, EMA) on a fixed
 synthetic batch, and one denoised chunk as the agent samples it (batch 1, 16 DDIM steps), in three
 settings: float32 with contiguous (NCHW) images, the reference and what the package trained with
-before; float32 with channels-last images; and the preset's bfloat16 autocast with channels-last.
-``x fp32`` divides by the reference measured in this run, so machines compare. In bf16 the chunk is
+before; float32 with channels-last images; the preset's bfloat16 autocast with channels-last and
+the CPU's bfloat16 kernels (``native``); and the same autocast with its products through float32
+kernels (``float32``, :mod:`softvt_campaign.baselines.bf16`: how ``softvt-train`` trains on a CPU
+without bfloat16 instructions; its chunk is not timed, sampling always runs the native kernels).
+``x fp32`` divides by the reference measured in this run, so machines compare. The process runs
+pinned, as the package's import pins it; ``softvt-train`` releases oneDNN for a native bfloat16
+run, and ``--release-onednn`` times every row so (on a CPU without bfloat16 instructions the two
+are the same). In bf16 the chunk is
 also timed as sampling ran before ``DiffusionPolicyModel.weight_cast_cache``, every U-Net call
 casting the weights afresh (``chunk ms, cast per call``; the same actions bit for bit). The cost does not
 depend on the weights or the pixel values, so untrained weights and random images are timed.
@@ -33,7 +39,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-SETTINGS = (("fp32", False), ("fp32", True), ("bf16", True))  # (precision, channels-last images)
+# (precision, channels-last images, bf16 products)
+SETTINGS = (("fp32", False, None), ("fp32", True, None), ("bf16", True, "native"), ("bf16", False, "float32"))
 
 
 class SyntheticWindows:
@@ -59,24 +66,17 @@ class SyntheticWindows:
         return {k: torch.from_numpy(v.copy()) for k, v in self.obs.items()}, torch.from_numpy(self.actions.copy())
 
 
-def use_channels_last(model, on: bool) -> None:
-    """Switch the model's image encoders between NHWC and NCHW weights and inputs."""
-    for encoder in model.encoders.values():
-        encoder.channels_last = on
-        encoder.to(memory_format=torch.channels_last if on else torch.contiguous_format)
-
-
-def time_setting(variant: str, precision: str, channels_last: bool, steps: int,
-                 chunks: int) -> tuple[float, float, float | None]:
-    """(ms per training step, ms per denoised chunk, the same with the weights cast per U-Net call
-    (bf16 only, else None)) of one setting."""
+def time_setting(variant: str, precision: str, channels_last: bool, products: str | None, steps: int,
+                 chunks: int) -> tuple[float, float | None, float | None]:
+    """(ms per training step, ms per denoised chunk (None for float32 products), the same with the
+    weights cast per U-Net call (native bf16 only, else None)) of one setting."""
     from softvt_campaign.baselines.config import make_config
     from softvt_campaign.baselines.model import noise_scheduler
     from softvt_campaign.baselines.train import Training, empty_stats
 
     cfg = make_config(variant, "cpu", precision=precision, threads=0)
-    run = Training(cfg, empty_stats(cfg), steps=steps + 3)
-    use_channels_last(run.model, channels_last)
+    run = Training(cfg, empty_stats(cfg), steps=steps + 3, bf16_products=products or "native")
+    run.model.use_channels_last(channels_last)
     data = SyntheticWindows(cfg, run.model)
     for _ in range(3):  # warm-up: oneDNN picks its kernels on the first calls
         run.train_step(data)
@@ -84,6 +84,8 @@ def time_setting(variant: str, precision: str, channels_last: bool, steps: int,
     for _ in range(steps):
         run.train_step(data)
     step_ms = 1e3 * (time.perf_counter() - t0) / steps
+    if products == "float32":
+        return step_ms, None, None
     model = run.model.eval()
     obs = {k: v[:1] for k, v in data.batch(None)[0].items()}
     scheduler, generator = noise_scheduler(cfg, inference=True), torch.Generator().manual_seed(0)
@@ -138,6 +140,8 @@ def main(argv=None) -> str:
     ap.add_argument("--chunks", type=int, default=10, help="timed denoised chunks per setting")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--variants", nargs="+", default=["vo-c", "vt-c"])
+    ap.add_argument("--release-onednn", action="store_true",
+                    help="oneDNN's own CPU dispatch for every row, as softvt-train runs a native bfloat16 training")
     ap.add_argument("--demos", type=Path, default=None, help="also time the step on these rendered demos' windows")
     ap.add_argument("--suite", default="object_soft", help="with --demos: the suite whose demos are read")
     ap.add_argument("--tasks", type=int, nargs="+", default=[0], help="with --demos: the tasks read")
@@ -146,19 +150,24 @@ def main(argv=None) -> str:
     args = ap.parse_args(argv)
     if args.demos is not None and args.cache is None:
         ap.error("--demos needs --cache DIR: training reads its windows memory-mapped from a data cache")
+    if args.release_onednn:
+        from mani_skill_softvt.provenance.numerics import release
+
+        release("onednn")  # before torch's first oneDNN primitive, as softvt-train does
     torch.set_num_threads(args.threads)
-    lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s)", "",
-             "| variant | precision | images | step ms | x fp32 | steps/s | chunk ms | x fp32 | chunk ms, cast per call |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s), oneDNN "
+             f"{'released' if args.release_onednn else 'pinned'}", "",
+             "| variant | precision | bf16 products | images | step ms | x fp32 | steps/s | chunk ms | x fp32 | "
+             "chunk ms, cast per call |", "|---|---|---|---|---|---|---|---|---|---|"]
     for variant in args.variants:
         ref = None
-        for precision, cl in SETTINGS:
-            step_ms, chunk_ms, per_call_ms = time_setting(variant, precision, cl, args.steps, args.chunks)
+        for precision, cl, products in SETTINGS:
+            step_ms, chunk_ms, per_call_ms = time_setting(variant, precision, cl, products, args.steps, args.chunks)
             ref = ref or (step_ms, chunk_ms)
             per_call = "-" if per_call_ms is None else f"{per_call_ms:.1f}"
-            lines.append(f"| {variant} | {precision} | {'channels-last' if cl else 'NCHW'} | {step_ms:.1f} | "
-                         f"{step_ms / ref[0]:.2f} | {1e3 / step_ms:.2f} | {chunk_ms:.1f} | {chunk_ms / ref[1]:.2f} | "
-                         f"{per_call} |")
+            chunk = "- | -" if chunk_ms is None else f"{chunk_ms:.1f} | {chunk_ms / ref[1]:.2f}"
+            lines.append(f"| {variant} | {precision} | {products or '-'} | {'channels-last' if cl else 'NCHW'} | "
+                         f"{step_ms:.1f} | {step_ms / ref[0]:.2f} | {1e3 / step_ms:.2f} | {chunk} | {per_call} |")
             print(lines[-1], flush=True)
     if args.demos is not None:
         lines += ["", f"preset step on demo windows ({args.suite}, tasks {args.tasks}) against the synthetic batch, "

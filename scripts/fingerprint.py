@@ -26,8 +26,8 @@ from mani_skill_softvt.provenance.numerics import machine_kind, resolved
 from mani_skill_softvt.provenance.stack import software_stack
 
 CASES = {**LIBRARY_CASES, **BASELINE_CASES}
-DEFAULT_CASES = ["expert_soft", "expert_rigid", "tactile_frame", "dp_inference", "dp_training", "calibration_trial",
-                 "record"]
+DEFAULT_CASES = ["expert_soft", "expert_rigid", "tactile_frame", "dp_inference", "dp_training",
+                 "dp_training_float32_products", "calibration_trial", "record"]
 
 
 HASHES = ("episode", "states", "rgb", "tactile", "pressure", "rigid", "geometric", "losses", "weights")

@@ -216,6 +216,92 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
     assert isinstance(DiffusionPolicyModel(fp32, T.empty_stats(fp32)).weight_cast_cache(), contextlib.nullcontext)
 
 
+def _exact_bf16_semantics(op, args, n_terms):
+    """``op`` on the operands rounded to bfloat16, summed exactly (float64), and the bound on what a
+    kernel that accumulates those exact products in float32 and rounds once to bfloat16 may differ
+    from it: half a bfloat16 unit (2^-8 relative) plus float32's summation error over ``n_terms``
+    terms (n 2^-24 times the sum of the terms' magnitudes, ``op`` over the operands' magnitudes)."""
+    exact = op(*(a.to(torch.bfloat16).double() for a in args))
+    magnitude = op(*(a.to(torch.bfloat16).double().abs() for a in args))
+    return exact, 2.0 ** -8 * exact.abs() + 1.01 * n_terms * 2.0 ** -24 * magnitude
+
+
+def test_float32_products_are_bfloat16_products_accumulated_in_float32_and_rounded_once():
+    # The semantics of oneDNN's bfloat16 kernels on CPUs with AVX-512 BF16 or AMX, with float32
+    # kernels: a convolution's and a linear layer's outputs and gradients (input and weight) are
+    # bfloat16 and within the bound of one rounding of a float32 sum of the exact products. A
+    # kernel that summed in bfloat16 misses it by orders of magnitude over these hundreds of terms;
+    # a float32 result would not be bfloat16.
+    from torch.nn import functional as F
+    from torch.nn.grad import conv2d_input, conv2d_weight
+
+    from softvt_campaign.baselines.bf16 import Float32Products
+
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(8, 32, 12, 12, generator=g).to(memory_format=torch.channels_last)
+    w = 0.1 * torch.randn(24, 32, 3, 3, generator=g)
+    grad = torch.randn(8, 24, 12, 12, generator=g).to(memory_format=torch.channels_last)
+    z, lw, lgrad = torch.randn(64, 96, generator=g), 0.1 * torch.randn(40, 96, generator=g), torch.randn(64, 40, generator=g)
+    xs, ws, zs, lws = (t.clone().requires_grad_() for t in (x, w, z, lw))
+    with Float32Products() as mode, torch.autocast("cpu", torch.bfloat16):
+        y, h = F.conv2d(xs, ws, padding=1), F.linear(zs, lws)
+        y.backward(grad.to(torch.bfloat16))
+        h.backward(lgrad.to(torch.bfloat16))
+    assert mode.calls == 5  # the convolution, its gradients, the linear layer (mm), its two gradients (mm)
+    assert y.dtype == h.dtype == torch.bfloat16
+    got = {"conv": y, "conv dx": xs.grad, "conv dw": ws.grad, "linear": h, "linear dz": zs.grad, "linear dw": lws.grad}
+    want = {
+        "conv": _exact_bf16_semantics(lambda a, b: F.conv2d(a, b, padding=1), (x, w), 32 * 9),
+        "conv dx": _exact_bf16_semantics(lambda b, c: conv2d_input(x.shape, b, c, padding=1), (w, grad), 24 * 9),
+        "conv dw": _exact_bf16_semantics(lambda a, c: conv2d_weight(a, w.shape, c, padding=1), (x, grad), 8 * 144),
+        "linear": _exact_bf16_semantics(lambda a, b: a @ b.T, (z, lw), 96),
+        "linear dz": _exact_bf16_semantics(lambda c, b: c @ b, (lgrad, lw), 40),
+        "linear dw": _exact_bf16_semantics(lambda c, a: c.T @ a, (lgrad, z), 64),
+    }
+    for name, (exact, bound) in want.items():
+        value = got[name].double()
+        # the gradients reach the float32 leaves through autocast's cast: bfloat16 values
+        assert torch.equal(value, got[name].to(torch.bfloat16).double()), name
+        assert bool(((value - exact).abs() <= bound).all()), name
+
+
+def test_bf16_products_are_native_only_where_the_cpu_has_bfloat16_instructions():
+    from softvt_campaign.baselines.bf16 import choose_products
+
+    assert choose_products("auto", "bf16", {"avx2", "fma"}) == "float32"
+    assert choose_products("auto", "bf16", {"avx512f", "avx512_bf16"}) == "native"
+    assert choose_products("auto", "bf16", {"amx_bf16"}) == "native"
+    assert choose_products("native", "bf16", {"avx2"}) == "native"
+    assert choose_products("float32", "bf16", {"amx_bf16"}) == "float32"
+    assert choose_products("auto", "fp32", {"avx2"}) is None
+    with pytest.raises(ValueError, match="'fp16'.*auto"):
+        choose_products("fp16", "bf16")
+
+
+def test_a_run_counts_its_steps_by_bf16_products_and_resumes_bit_for_bit_under_float32_products(tmp_path):
+    _write_demos(tmp_path / "demos")
+    cfg = make_config("vt-c", **TINY)  # the cpu preset: bf16
+    straight = T.train(cfg, tmp_path / "demos", tmp_path / "a", progress=False, bf16_products="float32")
+    T.train(cfg, tmp_path / "demos", tmp_path / "b", stop_after=3, progress=False, bf16_products="float32")
+    resumed = T.train(cfg, tmp_path / "demos", tmp_path / "b", progress=False, bf16_products="float32")
+    a, b = torch.load(straight, weights_only=False), torch.load(resumed, weights_only=False)
+    assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+    assert a["bf16_product_steps"] == b["bf16_product_steps"] == {"float32": cfg.steps}
+    # A run resumed on a machine of the other kind says how many steps each trained.
+    T.train(cfg, tmp_path / "demos", tmp_path / "c", stop_after=4, progress=False, bf16_products="float32")
+    mixed = torch.load(T.train(cfg, tmp_path / "demos", tmp_path / "c", progress=False), weights_only=False)
+    assert mixed["bf16_product_steps"] == {"float32": 4, "native": cfg.steps - 4}
+    assert not all(torch.equal(a["model"][k], mixed["model"][k]) for k in a["model"])  # other kernels, other bits
+    # A checkpoint from before the choice trained natively throughout.
+    ckpt = torch.load(tmp_path / "c" / T.CHECKPOINT, weights_only=False)
+    del ckpt["bf16_product_steps"]
+    run = T.Training(cfg, T.empty_stats(cfg), cfg.steps)
+    run.load(ckpt)
+    assert run.bf16_product_steps == {"native": cfg.steps}
+    with pytest.raises(ValueError, match="bf16_products 'auto'"):
+        T.Training(cfg, T.empty_stats(cfg), cfg.steps, bf16_products="auto")
+
+
 def test_paper_preset_has_the_papers_parameter_count():
     # Appendix, table of VO/VT variants: Diffusion Policy VO has 329.2M trainable parameters.
     from softvt_campaign.baselines.model import DiffusionPolicyModel

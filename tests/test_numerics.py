@@ -336,9 +336,10 @@ def test_a_committed_policys_action_chunk_is_the_golden_one():
 
 # The policy's action chunk keeps a golden in the default run.
 @pytest.mark.slow  # in CI's slow pass: the default run keeps under its 10-minute budget
-def test_training_a_small_diffusion_policy_gives_the_golden_weights():
-    got = DP.dp_training()
-    _same("dp_training", got, ("losses", "weights", "episode"))
+@pytest.mark.parametrize("case", ["dp_training", "dp_training_float32_products"])
+def test_training_a_small_diffusion_policy_gives_the_golden_weights(case):
+    got = DP.CASES[case]()
+    _same(case, got, ("losses", "weights", "episode"))
 
 
 @pytest.mark.parametrize("case", ["expert_soft", "expert_rigid"])

@@ -4,7 +4,8 @@ says how they are used; ``scripts/fingerprint.py`` runs both):
 - ``dp_inference``: a committed Diffusion Policy's action chunk for a fixed observation window
   and noise seed (its bfloat16 encoders and U-Net, DDIM);
 - ``dp_training``: a small Diffusion Policy config trained some steps on fixed synthetic windows:
-  the weights, EMA and losses.
+  the weights, EMA and losses; ``dp_training_float32_products`` the same with the bfloat16 products
+  through float32 kernels (:mod:`.baselines.bf16`, how a CPU without bfloat16 instructions trains).
 """
 
 from __future__ import annotations
@@ -58,9 +59,10 @@ def _sample(policy: str | Path, context=None):
         torch.set_num_threads(threads)
 
 
-def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
+def dp_training(steps: int = 200, variant: str = "vt-c", bf16_products: str = "native") -> dict:
     """A small Diffusion Policy (the ``cpu`` preset's architecture, narrower; bfloat16 mixed
-    precision) trained ``steps`` steps of batch 8 on fixed synthetic windows, on one thread."""
+    precision, its products' kernels ``bf16_products``) trained ``steps`` steps of batch 8 on fixed
+    synthetic windows, on one thread."""
     import torch
 
     from .baselines.config import make_config
@@ -80,7 +82,7 @@ def dp_training(steps: int = 200, variant: str = "vt-c") -> dict:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        run = Training(cfg, windows.stats(), steps)
+        run = Training(cfg, windows.stats(), steps, bf16_products)
         for _ in range(steps):
             run.train_step(windows)
     finally:
@@ -130,4 +132,5 @@ def first_difference(a: list[str], b: list[str]) -> int | None:
     return None if i == len(a) == len(b) else i
 
 
-CASES = {"dp_inference": dp_inference, "dp_training": dp_training}
+CASES = {"dp_inference": dp_inference, "dp_training": dp_training,
+         "dp_training_float32_products": lambda: dp_training(bf16_products="float32")}

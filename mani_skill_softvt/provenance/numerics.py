@@ -43,11 +43,12 @@ WARP_PINNED_FLAGS = ("-target-cpu x86-64-v3 -mllvm=-inline-threshold=9000 -mllvm
                      "-mllvm=-slp-recursion-max-depth=4")
 _AVX512_NUMPY = "AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR"
 
-def _cpu_flags() -> set[str]:
+def cpu_flags() -> set[str]:
+    """The CPU's feature flags as ``/proc/cpuinfo`` names them (x86 ``flags``, arm ``Features``)."""
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
-                if line.startswith("flags"):
+                if line.startswith(("flags", "Features")):
                     return set(line.split(":", 1)[1].split())
     except OSError:
         pass
@@ -57,7 +58,7 @@ def _cpu_flags() -> set[str]:
 # OpenCV warns on stderr, at every import, of each disabled feature the CPU lacks: name only those it
 # has (AVX512-SKX is the only AVX-512 target its wheel dispatches to; F and COMMON come under it).
 _AVX512_OPENCV = "AVX512F,AVX512-COMMON,AVX512-SKX" if {"avx512f", "avx512cd", "avx512bw", "avx512dq",
-                                                        "avx512vl"} <= _cpu_flags() else ""
+                                                        "avx512vl"} <= cpu_flags() else ""
 
 # Each part: the variables that pin it (read by the library as it loads or first dispatches).
 PARTS: dict[str, dict[str, str]] = {

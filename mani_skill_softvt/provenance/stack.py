@@ -15,7 +15,7 @@ from importlib import metadata
 import cv2
 import torch
 
-from .numerics import chosen, resolved
+from .numerics import chosen, cpu_flags, resolved
 from ..version import __version__
 
 # The distributions whose arithmetic reaches a record: the physics (warp, newton, sapien), the
@@ -63,24 +63,13 @@ def cpu_isa(flags: set[str] | None = None, torch_capability: str | None = None,
     :data:`ARITHMETIC_CPU_FLAGS` the CPU has, then oneDNN's ISA cap if ``ONEDNN_MAX_CPU_ISA`` sets one.
     Arguments left None are read from this machine."""
     if flags is None:
-        flags = _cpu_flags()
+        flags = cpu_flags()
     if torch_capability is None:
         torch_capability = torch.backends.cpu.get_cpu_capability()
     if onednn_max_isa is None:
         onednn_max_isa = os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or ""
     parts = [torch_capability.replace(" ", "_")] + [f for f in ARITHMETIC_CPU_FLAGS if f in flags]
     return " ".join(parts + ([f"onednn_max={onednn_max_isa}"] if onednn_max_isa else []))
-
-
-def _cpu_flags() -> set[str]:
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith(("flags", "Features")):  # x86, arm
-                    return set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return set()
 
 
 @lru_cache(maxsize=1)

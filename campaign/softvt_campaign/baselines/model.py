@@ -81,6 +81,11 @@ class DiffusionPolicyModel(nn.Module):
         self.unet = ConditionalUnet1D(cfg.action_dim, self.global_cond_dim, cfg.unet_dims, cfg.unet_kernel,
                                       cfg.unet_groups, cfg.timestep_embed_dim)
 
+    def use_channels_last(self, on: bool) -> None:
+        """The image encoders' layout: NHWC (the bf16 default) or NCHW (fp32's, and float32 products')."""
+        for encoder in self.encoders.values():
+            encoder.use_channels_last(on)
+
     def mixed_precision(self):
         """The autocast context of the config's precision (a no-op for fp32)."""
         if self.cfg.precision != "bf16":

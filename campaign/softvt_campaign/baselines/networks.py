@@ -85,9 +85,12 @@ class ImageEncoder(nn.Module):
         self.keypoints = nn.Conv2d(cin, keypoints, 1)
         self.pool = SpatialSoftmax()
         self.out = nn.Linear(2 * keypoints, feature_dim)
-        self.channels_last = channels_last
-        if channels_last:
-            self.to(memory_format=torch.channels_last)
+        self.use_channels_last(channels_last)
+
+    def use_channels_last(self, on: bool) -> None:
+        """Switch weights and inputs between NHWC and NCHW (the same values, another layout)."""
+        self.channels_last = on
+        self.to(memory_format=torch.channels_last if on else torch.contiguous_format)
 
     def forward(self, x):
         if self.channels_last:

@@ -23,6 +23,7 @@ to continue). Writes under ``--out`` (default ``outputs/baselines/<suite>/<varia
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import time
 from pathlib import Path
@@ -39,6 +40,7 @@ from mani_skill_softvt.provenance.numerics import chosen as chosen_numerics
 from mani_skill_softvt.provenance.numerics import release, resolved
 from mani_skill_softvt.paths import DEMOS_DIR, REPO_DIR
 from mani_skill_softvt.tasks.suites import get_suite
+from .bf16 import BF16_PRODUCTS, Float32Products, choose_products
 from .config import (
     PRESETS,
     RECIPES,
@@ -96,10 +98,19 @@ def batch_indices(cfg: DPConfig, samples: int, step: int) -> np.ndarray:
 class Training:
     """Model, EMA, optimiser and schedule of one run, with save and load."""
 
-    def __init__(self, cfg: DPConfig, stats: dict, steps: int):
+    def __init__(self, cfg: DPConfig, stats: dict, steps: int, bf16_products: str = "native"):
+        """``bf16_products``: in a bf16 run, the kernels of its products, ``"native"`` or
+        ``"float32"`` (:mod:`.bf16`); a float32 run ignores it."""
+        if cfg.precision == "bf16" and bf16_products not in ("native", "float32"):
+            raise ValueError(f"bf16_products {bf16_products!r}: native or float32 (see baselines/bf16.py)")
         torch.manual_seed(cfg.seed)  # weight initialisation
+        self.bf16_products = bf16_products if cfg.precision == "bf16" else None
+        # Steps trained with each kind of bfloat16 products: a run may resume on another machine.
+        self.bf16_product_steps: dict[str, int] = {}
         self.cfg, self.steps, self.device = cfg, steps, torch.device(cfg.device)
         self.model = DiffusionPolicyModel(cfg, stats).to(self.device)
+        if self.bf16_products == "float32":
+            self.model.use_channels_last(False)  # float32 kernels on NCHW: no layout copies (baselines/bf16.py)
         self.ema = EMAModel(self.model.parameters(), decay=cfg.ema_max_decay, use_ema_warmup=True, inv_gamma=1.0,
                             power=cfg.ema_power)
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr, betas=cfg.betas,
@@ -115,7 +126,7 @@ class Training:
         return {"config": self.cfg.to_dict(), "steps": self.steps, "data_key": data_key, "step": self.step, "model": self.model.state_dict(),
                 "ema": self.ema.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "lr_schedule": self.lr_schedule.state_dict(), "generator": self.generator.get_state(),
-                "losses": self.losses, "wall_s": self.wall_s}
+                "losses": self.losses, "wall_s": self.wall_s, "bf16_product_steps": self.bf16_product_steps}
 
     def load(self, ckpt: dict) -> None:
         self.model.load_state_dict(ckpt["model"])
@@ -125,6 +136,9 @@ class Training:
         self.generator.set_state(ckpt["generator"])
         self.step, self.losses = int(ckpt["step"]), list(ckpt["losses"])
         self.wall_s = float(ckpt.get("wall_s", 0.0))
+        # Checkpoints before the choice existed trained every bfloat16 step with the native kernels.
+        default = {"native": self.step} if self.bf16_products and self.step else {}
+        self.bf16_product_steps = dict(ckpt.get("bf16_product_steps", default))
 
     def train_step(self, windows: DemoWindows) -> float:
         obs, actions = windows.batch(batch_indices(self.cfg, len(windows), self.step))
@@ -134,13 +148,16 @@ class Training:
         obs = {k: v.to(self.device) for k, v in obs.items()}
         actions = actions.to(self.device)
         self.model.train()
-        loss = self.model.loss(obs, actions, self.generator, self.noise)
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
+        with Float32Products() if self.bf16_products == "float32" else contextlib.nullcontext():
+            loss = self.model.loss(obs, actions, self.generator, self.noise)
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
         self.optimizer.step()
         self.lr_schedule.step()
         self.ema.step(self.model.parameters())
         self.step += 1
+        if self.bf16_products:
+            self.bf16_product_steps[self.bf16_products] = self.bf16_product_steps.get(self.bf16_products, 0) + 1
         self.losses.append(float(loss.detach()))
         return self.losses[-1]
 
@@ -159,7 +176,7 @@ class Training:
                 "episodes": windows.episodes, "samples": len(windows),
                 "camera_render_size": list(windows.camera_render_size), "train_wall_s": self.wall_s,
                 "data_key": windows.key, "data_cache": None if windows.cache is None else str(windows.cache.resolve()),
-                "numerics": resolved()}
+                "numerics": resolved(), "bf16_product_steps": self.bf16_product_steps}
 
 
 def save(path: Path, obj: dict) -> None:
@@ -211,12 +228,14 @@ def snapshot_path(out: Path, step: int) -> Path:
 
 
 def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = None, progress: bool = True,
-          deadline: float | None = None, snapshot_every: int | None = None, cache: Path | None = None) -> Path:
+          deadline: float | None = None, snapshot_every: int | None = None, cache: Path | None = None,
+          bf16_products: str = "native") -> Path:
     """Train (or resume) the run in ``out``; returns the path of ``policy.pt``. ``stop_after``
     ends this call after that many optimiser steps, ``deadline`` (``time.monotonic()``) at the
     first checkpoint after it (the run resumes later, the same as an uninterrupted one).
     ``snapshot_every`` keeps a snapshot policy every that many steps (:func:`snapshot_path`).
-    ``cache``: the prepared-data directory (default ``out/data_cache``; runs may share one)."""
+    ``cache``: the prepared-data directory (default ``out/data_cache``; runs may share one).
+    ``bf16_products``: ``"native"`` or ``"float32"``, the kernels of a bf16 run's products (:mod:`.bf16`)."""
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
     out = Path(out)
@@ -234,7 +253,7 @@ def train(cfg: DPConfig, demos_root: Path, out: Path, stop_after: int | None = N
     steps = total_steps(cfg, len(windows))
     if ckpt is not None:
         check_same_run(ckpt, cfg, ckpt_path, windows.key, steps)
-    run = Training(cfg, windows.stats(), steps)
+    run = Training(cfg, windows.stats(), steps, bf16_products)
     if ckpt is not None:
         run.load(ckpt)
     end = steps if stop_after is None else min(steps, run.step + stop_after)
@@ -270,6 +289,10 @@ def main(argv=None) -> Path:
                     help="stop at the first checkpoint after this many minutes (run again to continue)")
     ap.add_argument("--snapshot-every", type=int, default=None, metavar="N",
                     help="also keep the policy of every N-th step (snapshots/), for curves against training time")
+    ap.add_argument("--bf16-products", default="auto", choices=BF16_PRODUCTS,
+                    help="a bf16 run's convolutions and matrix products: the CPU's bfloat16 kernels (native) or "
+                         "float32 kernels on the same operands, rounded once (float32: the same arithmetic, 12x "
+                         "cheaper on a CPU without bfloat16 instructions); auto: native where the CPU has them")
     args = ap.parse_args(argv)
     try:
         if args.recipe and args.config != "cpu":
@@ -281,13 +304,19 @@ def main(argv=None) -> Path:
         ap.error(str(e))
     out = args.out or default_out(cfg, args.recipe)
     deadline = None if args.budget_min is None else time.monotonic() + 60 * args.budget_min
-    if cfg.precision == "bf16" and "onednn" in chosen_numerics().parts:
+    products = choose_products(args.bf16_products, cfg.precision)
+    if products == "native" and "onednn" in chosen_numerics().parts:
         # Pinned to AVX2, oneDNN emulates bfloat16 and a step costs 23x (docs/benchmarks.md): the training
         # takes the CPU's own bfloat16 kernels, and its weights reproduce on machines of this kind.
         release("onednn")
         print("note: bfloat16 training runs oneDNN's own CPU dispatch (the pinned AVX2 one costs 23x a step); "
               "the weights reproduce on machines of this kind, the evaluations of the policy on any")
-    path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache)
+    elif products == "float32":
+        # No bfloat16 kernel runs, so every dispatch stays pinned.
+        print("note: bfloat16 products through float32 kernels (--bf16-products float32: this CPU has no bfloat16 "
+              "instructions), every dispatch pinned")
+    path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache,
+                 bf16_products=products or "native")
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
     return path
 
