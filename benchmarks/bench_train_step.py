@@ -19,6 +19,13 @@ casting the weights afresh (``chunk ms, cast per call``; the same actions bit fo
 depend on the weights or the pixel values, so untrained weights and random images are timed.
 One thread is what each of the campaign's two parallel training runs gets.
 
+A first table compares the two kinds of bfloat16 products with the arithmetic they stand for (the
+bfloat16 operands' products summed exactly, rounded once): for a 3x3 convolution of the encoders'
+width and a linear layer, forward and both gradients, the share of elements that are not that
+correctly rounded value and the median relative error to the exact sum. One rounding gives about
+2^-8 / 3 (1.3e-3) and a few elements off by a unit where float32's sum lands beside a rounding
+boundary; a kernel that sums in bfloat16 or rounds twice shows more.
+
 With ``--demos DIR`` a second table times the preset's step on real demo windows (``load_windows``
 through ``--cache``: memory-mapped frames, the epoch's permutation, the gather) against the
 synthetic batch, in alternating blocks of the same run so that the other jobs on the machine load
@@ -104,6 +111,39 @@ def time_setting(variant: str, precision: str, channels_last: bool, products: st
     return step_ms, cached, chunk_ms()
 
 
+def accuracy_rows() -> list[str]:
+    """The table of bfloat16 product kernels against their exact arithmetic (see the module's doc)."""
+    from torch.nn import functional as F
+    from torch.nn.grad import conv2d_input, conv2d_weight
+
+    from softvt_campaign.baselines.bf16 import Float32Products
+
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(16, 64, 21, 21, generator=g).to(memory_format=torch.channels_last)
+    w = 0.05 * torch.randn(64, 64, 3, 3, generator=g)
+    dy = torch.randn(16, 64, 21, 21, generator=g).to(memory_format=torch.channels_last)
+    z, lw, dh = torch.randn(64, 512, generator=g), 0.05 * torch.randn(256, 512, generator=g), torch.randn(64, 256, generator=g)
+    bf = lambda t: t.to(torch.bfloat16).double()
+    want = {"conv": F.conv2d(bf(x), bf(w), padding=1), "conv dx": conv2d_input(x.shape, bf(w), bf(dy), padding=1),
+            "conv dw": conv2d_weight(bf(x), w.shape, bf(dy), padding=1), "linear": bf(z) @ bf(lw).T,
+            "linear dz": bf(dh) @ bf(lw), "linear dw": bf(dh).T @ bf(z)}
+    rows = ["bfloat16 products against their arithmetic (bf16 operands, exact sum, one rounding)", "",
+            "| product | kernels | off the rounded value | median relative error |", "|---|---|---|---|"]
+    for kind in ("native", "float32"):
+        xs, ws, zs, lws = (t.to(torch.bfloat16).float().requires_grad_() for t in (x, w, z, lw))
+        with Float32Products() if kind == "float32" else contextlib.nullcontext(), torch.autocast("cpu", torch.bfloat16):
+            y, h = F.conv2d(xs, ws, padding=1), F.linear(zs, lws)
+            y.backward(dy.to(torch.bfloat16))
+            h.backward(dh.to(torch.bfloat16))
+        got = {"conv": y, "conv dx": xs.grad, "conv dw": ws.grad, "linear": h, "linear dz": zs.grad, "linear dw": lws.grad}
+        for name, exact_value in want.items():
+            value = got[name].detach().double()
+            off = float((value != exact_value.to(torch.bfloat16).double()).double().mean())
+            rel = float(((value - exact_value).abs() / exact_value.abs().clamp_min(1e-12)).median())
+            rows.append(f"| {name} | {kind} | {100 * off:.2f} % | {rel:.2e} |")
+    return rows
+
+
 def time_demo_windows(variant: str, demos, suite: str, tasks: list[int], cache, steps: int,
                       blocks: int = 5) -> dict:
     """Median ms per preset training step on the demo windows and on the synthetic batch, and per
@@ -155,7 +195,9 @@ def main(argv=None) -> str:
 
         release("onednn")  # before torch's first oneDNN primitive, as softvt-train does
     torch.set_num_threads(args.threads)
-    lines = [f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s), oneDNN "
+    accuracy = accuracy_rows()
+    print("\n".join(accuracy), flush=True)
+    lines = accuracy + ["", f"training step (batch 32) and denoised chunk, cpu preset, {args.threads} thread(s), oneDNN "
              f"{'released' if args.release_onednn else 'pinned'}", "",
              "| variant | precision | bf16 products | images | step ms | x fp32 | steps/s | chunk ms | x fp32 | "
              "chunk ms, cast per call |", "|---|---|---|---|---|---|---|---|---|---|"]

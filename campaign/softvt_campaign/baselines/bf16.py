@@ -4,10 +4,10 @@ bfloat16 instructions.
 Under ``torch.autocast(dtype=torch.bfloat16)`` (``precision="bf16"``) a convolution or matrix
 product takes bfloat16 operands and returns a bfloat16 result. On a CPU with AVX-512 BF16 or AMX,
 where the committed policies trained, oneDNN multiplies the operands exactly, accumulates in
-float32 (its default, "strict" accumulation mode) and rounds the result once to bfloat16. A CPU
-without those instructions has no such kernel: the products fall to emulations that cost 17 s a
-training step on an AVX2-only AMD EPYC against 1.2-1.5 s in float32, and whose convolution
-gradients round more than once (measured: docs/benchmarks.md).
+float32 (its default, "strict" accumulation mode: oneDNN Developer Guide, "Primitive Attributes:
+accumulation mode") and rounds the result once to bfloat16. A CPU without those instructions has
+no such kernel: its emulation costs 12x a float32 step on an AVX2-only AMD EPYC, and its
+convolution gradients there round more than once (measured: docs/benchmarks.md).
 
 :class:`Float32Products` computes the same thing with float32 kernels. A bfloat16 operand widens
 to float32 exactly, the product of two bfloat16 significands (8 bits each) is exact in float32's

@@ -37,8 +37,9 @@ Where this differs from the paper, and why:
   and the U-Net's matrix products under ``torch.autocast``, the image encoders on channels-last
   tensors; weights, optimiser, normalisers, the spatial softmax and the loss stay float32). On
   this machine's AVX-512 BF16 cores a training step takes 0.61 of the float32 time
-  (benchmarks/bench_train_step.py); ``precision="fp32"`` (NCHW images) is the reference, and what
-  policy files from before the field was kept load as.
+  (benchmarks/bench_train_step.py); on a CPU without bfloat16 instructions training computes the
+  same products with float32 kernels (:mod:`.bf16`). ``precision="fp32"`` (NCHW images) is the
+  reference, and what policy files from before the field was kept load as.
 """
 
 from __future__ import annotations
