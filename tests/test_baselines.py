@@ -999,6 +999,20 @@ def test_train_command_line_applies_recipes_to_the_cpu_preset_only(tmp_path):
     assert T.default_out(make_config("vo-c", "paper"), None).name == "vo-c-paper"
 
 
+def test_the_train_command_takes_float32_products_pinned_in_full_where_the_cpu_has_no_bfloat16(tmp_path, monkeypatch,
+                                                                                               capsys):
+    from softvt_campaign.baselines import bf16
+
+    _write_demos(tmp_path / "demos")
+    monkeypatch.setattr(bf16, "cpu_flags", lambda: {"avx2", "fma"})  # an AVX2-only CPU: auto takes float32
+    sets = [f"{k}={','.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in TINY.items()]
+    path = T.main(["--variant", "vo-c", "--set", *sets, "--demos", str(tmp_path / "demos"), "--out", str(tmp_path / "run")])
+    policy = torch.load(path, weights_only=False)
+    assert policy["bf16_product_steps"] == {"float32": TINY["steps"]}
+    assert policy["numerics"]["pinned"] and not policy["numerics"]["released"]  # nothing released
+    assert "float32 kernels" in capsys.readouterr().out
+
+
 def test_inference_fields_do_not_change_training(tmp_path):
     # What the recipe search relies on to derive exec4 from long without training it again.
     from softvt_campaign.baselines.config import INFERENCE_FIELDS, training_identity
