@@ -291,8 +291,8 @@ def main(argv=None) -> Path:
                     help="also keep the policy of every N-th step (snapshots/), for curves against training time")
     ap.add_argument("--bf16-products", default="auto", choices=BF16_PRODUCTS,
                     help="a bf16 run's convolutions and matrix products: the CPU's bfloat16 kernels (native) or "
-                         "float32 kernels on the same operands, rounded once (float32: the same arithmetic, 12x "
-                         "cheaper on a CPU without bfloat16 instructions); auto: native where the CPU has them")
+                         "float32 kernels on the same operands, rounded once (float32: the same arithmetic, 11-14x "
+                         "cheaper a step on a CPU without bfloat16 instructions); auto: native where the CPU has them")
     args = ap.parse_args(argv)
     try:
         if args.recipe and args.config != "cpu":
@@ -313,8 +313,8 @@ def main(argv=None) -> Path:
               "the weights reproduce on machines of this kind, the evaluations of the policy on any")
     elif products == "float32":
         # No bfloat16 kernel runs, so every dispatch stays pinned.
-        print("note: bfloat16 products through float32 kernels (--bf16-products float32: this CPU has no bfloat16 "
-              "instructions), every dispatch pinned")
+        why = "asked for" if args.bf16_products == "float32" else "this CPU has no bfloat16 instructions"
+        print(f"note: bfloat16 products through float32 kernels ({why}; baselines/bf16.py), every dispatch pinned")
     path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache,
                  bf16_products=products or "native")
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")
