@@ -216,53 +216,88 @@ def test_bf16_chunk_casts_weights_once_and_stays_the_same_bit_for_bit(monkeypatc
     assert isinstance(DiffusionPolicyModel(fp32, T.empty_stats(fp32)).weight_cast_cache(), contextlib.nullcontext)
 
 
-def _exact_bf16_semantics(op, args, n_terms):
-    """``op`` on the operands rounded to bfloat16, summed exactly (float64), and the bound on what a
-    kernel that accumulates those exact products in float32 and rounds once to bfloat16 may differ
-    from it: half a bfloat16 unit (2^-8 relative) plus float32's summation error over ``n_terms``
-    terms (n 2^-24 times the sum of the terms' magnitudes, ``op`` over the operands' magnitudes)."""
-    exact = op(*(a.to(torch.bfloat16).double() for a in args))
-    magnitude = op(*(a.to(torch.bfloat16).double().abs() for a in args))
-    return exact, 2.0 ** -8 * exact.abs() + 1.01 * n_terms * 2.0 ** -24 * magnitude
+def _bf16_product_cases(g: torch.Generator) -> dict:
+    """Each kind of product the networks take, with a bias: (function, bfloat16-exact float32
+    operands, the most terms any of its sums (output, each gradient) adds)."""
+    from torch.nn import functional as F
+
+    def r(*shape, scale=1.0):  # values bfloat16 holds exactly, so autocast's cast keeps them
+        return (scale * torch.randn(*shape, generator=g)).to(torch.bfloat16).float()
+
+    return {
+        "conv2d, channels-last": (lambda x, w, b: F.conv2d(x, w, b, padding=1),
+                                  (r(8, 32, 12, 12).contiguous(memory_format=torch.channels_last), r(24, 32, 3, 3, scale=0.1),
+                                   r(24)), 8 * 12 * 12),
+        "conv1d": (lambda x, w, b: F.conv1d(x, w, b, padding=2), (r(8, 32, 20), r(24, 32, 5, scale=0.1), r(24)), 32 * 5 + 1),
+        "conv_transpose1d": (lambda x, w, b: F.conv_transpose1d(x, w, b, stride=2, padding=1),
+                             (r(8, 24, 10), r(24, 16, 4, scale=0.1), r(16)), 8 * 19),
+        "linear": (lambda x, w, b: F.linear(x, w, b), (r(64, 96), r(40, 96, scale=0.1), r(40)), 97),
+        "linear, 3-D input": (lambda x, w, b: F.linear(x, w, b), (r(4, 16, 96), r(40, 96, scale=0.1), r(40)), 97),
+    }
 
 
 def test_float32_products_are_bfloat16_products_accumulated_in_float32_and_rounded_once():
     # The semantics of oneDNN's bfloat16 kernels on CPUs with AVX-512 BF16 or AMX, with float32
-    # kernels: a convolution's and a linear layer's outputs and gradients (input and weight) are
-    # bfloat16 and within the bound of one rounding of a float32 sum of the exact products. A
-    # kernel that summed in bfloat16 misses it by orders of magnitude over these hundreds of terms;
-    # a float32 result would not be bfloat16.
-    from torch.nn import functional as F
-    from torch.nn.grad import conv2d_input, conv2d_weight
-
+    # kernels: each product's output is bfloat16, and the output and every gradient (input, weight,
+    # bias) are within one rounding of a float32 sum of the exact products: half a bfloat16 unit
+    # (2^-8 relative) plus float32's summation error over n terms, n 2^-24 times the sum of the
+    # terms' magnitudes (the 1.01 covers rounding the float32 sum rather than the exact one). The
+    # exact values and the magnitudes are float64 autograd on the same operands (and on their
+    # absolute values: every product here is linear in each operand). A kernel that rounds each
+    # product, sums in bfloat16 or rounds twice misses the bound on hundreds of elements here.
     from softvt_campaign.baselines.bf16 import Float32Products
 
-    g = torch.Generator().manual_seed(0)
-    x = torch.randn(8, 32, 12, 12, generator=g).to(memory_format=torch.channels_last)
-    w = 0.1 * torch.randn(24, 32, 3, 3, generator=g)
-    grad = torch.randn(8, 24, 12, 12, generator=g).to(memory_format=torch.channels_last)
-    z, lw, lgrad = torch.randn(64, 96, generator=g), 0.1 * torch.randn(40, 96, generator=g), torch.randn(64, 40, generator=g)
-    xs, ws, zs, lws = (t.clone().requires_grad_() for t in (x, w, z, lw))
-    with Float32Products() as mode, torch.autocast("cpu", torch.bfloat16):
-        y, h = F.conv2d(xs, ws, padding=1), F.linear(zs, lws)
-        y.backward(grad.to(torch.bfloat16))
-        h.backward(lgrad.to(torch.bfloat16))
-    assert mode.calls == 5  # the convolution, its gradients, the linear layer (mm), its two gradients (mm)
-    assert y.dtype == h.dtype == torch.bfloat16
-    got = {"conv": y, "conv dx": xs.grad, "conv dw": ws.grad, "linear": h, "linear dz": zs.grad, "linear dw": lws.grad}
-    want = {
-        "conv": _exact_bf16_semantics(lambda a, b: F.conv2d(a, b, padding=1), (x, w), 32 * 9),
-        "conv dx": _exact_bf16_semantics(lambda b, c: conv2d_input(x.shape, b, c, padding=1), (w, grad), 24 * 9),
-        "conv dw": _exact_bf16_semantics(lambda a, c: conv2d_weight(a, w.shape, c, padding=1), (x, grad), 8 * 144),
-        "linear": _exact_bf16_semantics(lambda a, b: a @ b.T, (z, lw), 96),
-        "linear dz": _exact_bf16_semantics(lambda c, b: c @ b, (lgrad, lw), 40),
-        "linear dw": _exact_bf16_semantics(lambda c, a: c.T @ a, (lgrad, z), 64),
-    }
-    for name, (exact, bound) in want.items():
-        value = got[name].double()
-        # the gradients reach the float32 leaves through autocast's cast: bfloat16 values
-        assert torch.equal(value, got[name].to(torch.bfloat16).double()), name
-        assert bool(((value - exact).abs() <= bound).all()), name
+    for name, (fn, operands, n_terms) in _bf16_product_cases(torch.Generator().manual_seed(0)).items():
+        leaves = [t.clone().requires_grad_() for t in operands]
+        with Float32Products() as mode, torch.autocast("cpu", torch.bfloat16):
+            out = fn(*leaves)
+        grad = torch.randn(out.shape, generator=torch.Generator().manual_seed(1)).to(torch.bfloat16)
+        with Float32Products():
+            out.backward(grad)
+        assert out.dtype == torch.bfloat16 and mode.calls >= 1, name
+        exact = [t.double().requires_grad_() for t in operands]
+        magnitude = [t.double().abs().requires_grad_() for t in operands]
+        exact_out, magnitude_out = fn(*exact), fn(*magnitude)
+        exact_out.backward(grad.double())
+        magnitude_out.backward(grad.double().abs())
+        pairs = [("output", out, exact_out, magnitude_out)] + [
+            (f"gradient {i}", leaf.grad, e.grad, m.grad) for i, (leaf, e, m) in enumerate(zip(leaves, exact, magnitude))]
+        for part, got, want, size in pairs:
+            bound = 2.0 ** -8 * want.detach().abs() + 1.01 * n_terms * 2.0 ** -24 * size.detach()
+            assert bool(((got.detach().double() - want.detach()).abs() <= bound).all()), (name, part)
+
+
+def test_a_training_step_under_float32_products_leaves_no_bfloat16_product_to_the_native_kernels(tmp_path):
+    # The mode handles the operators in bf16.PRODUCTS; a product the networks reached by another
+    # operator would run the native kernels unseen. Below the mode, no bfloat16 product may arrive.
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    products = {"mm", "addmm", "bmm", "baddbmm", "addbmm", "mv", "addmv", "dot", "vdot", "matmul", "linear", "einsum",
+                "outer", "addr", "convolution", "convolution_backward", "_convolution", "mkldnn_convolution",
+                "_slow_conv2d_forward", "_slow_conv2d_backward", "mkldnn_linear", "_addmm_activation", "prelu",
+                "_scaled_dot_product_attention_math", "_scaled_dot_product_flash_attention_for_cpu"}
+
+    class Below(TorchDispatchMode):  # entered first, so it sees what the mode above hands down
+        def __init__(self):
+            super().__init__()
+            self.bf16, self.float32 = set(), set()
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            name = func.overloadpacket.__name__
+            if name in products:
+                dtypes = {a.dtype for a in args if isinstance(a, torch.Tensor)}
+                (self.bf16 if torch.bfloat16 in dtypes else self.float32).add(name)
+            return func(*args, **(kwargs or {}))
+
+    _write_demos(tmp_path / "demos")
+    for variant in ("vo-c", "vt-c"):
+        cfg = make_config(variant, **TINY)
+        windows = load_windows(cfg, tmp_path / "demos", None)
+        run = T.Training(cfg, windows.stats(), cfg.steps, bf16_products="float32")
+        with Below() as below:
+            run.train_step(windows)
+        assert below.bf16 == set(), variant
+        assert {"convolution", "convolution_backward", "mm", "addmm"} <= below.float32, variant
 
 
 def test_bf16_products_are_native_only_where_the_cpu_has_bfloat16_instructions():
@@ -291,7 +326,6 @@ def test_a_run_counts_its_steps_by_bf16_products_and_resumes_bit_for_bit_under_f
     T.train(cfg, tmp_path / "demos", tmp_path / "c", stop_after=4, progress=False, bf16_products="float32")
     mixed = torch.load(T.train(cfg, tmp_path / "demos", tmp_path / "c", progress=False), weights_only=False)
     assert mixed["bf16_product_steps"] == {"float32": 4, "native": cfg.steps - 4}
-    assert not all(torch.equal(a["model"][k], mixed["model"][k]) for k in a["model"])  # other kernels, other bits
     # A checkpoint from before the choice trained natively throughout.
     ckpt = torch.load(tmp_path / "c" / T.CHECKPOINT, weights_only=False)
     del ckpt["bf16_product_steps"]

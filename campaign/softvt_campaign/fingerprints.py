@@ -132,5 +132,10 @@ def first_difference(a: list[str], b: list[str]) -> int | None:
     return None if i == len(a) == len(b) else i
 
 
+def dp_training_float32_products() -> dict:
+    """``dp_training`` with the bfloat16 products through float32 kernels."""
+    return dp_training(bf16_products="float32")
+
+
 CASES = {"dp_inference": dp_inference, "dp_training": dp_training,
-         "dp_training_float32_products": lambda: dp_training(bf16_products="float32")}
+         "dp_training_float32_products": dp_training_float32_products}

@@ -215,6 +215,8 @@ UPGRADES = (
             "softvt_campaign.baselines.agent:camera_render_size"),
     Upgrade("policy file (.pt)", "config.precision", "fp32, the reference precision", "none needed",
             "softvt_campaign.baselines.config:DPConfig"),
+    Upgrade("training checkpoint", "bf16_product_steps", "every step of a bf16 run trained with the native "
+            "bfloat16 kernels (there was no other kind)", "none needed", "softvt_campaign.baselines.train:Training"),
     Upgrade("training data cache", "today's CACHE_FORMAT and FEATURES_VERSION in its key", "not current: built "
             "again from the renderings", "none needed (the next training rebuilds it)",
             "softvt_campaign.baselines.dataset:cache_key"),

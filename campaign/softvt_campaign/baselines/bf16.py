@@ -6,15 +6,17 @@ product takes bfloat16 operands and returns a bfloat16 result. On a CPU with AVX
 where the committed policies trained, oneDNN multiplies the operands exactly, accumulates in
 float32 (its default, "strict" accumulation mode: oneDNN Developer Guide, "Primitive Attributes:
 accumulation mode") and rounds the result once to bfloat16. A CPU without those instructions has
-no such kernel: its emulation costs 12x a float32 step on an AVX2-only AMD EPYC, and its
+no such kernel: its emulation costs 14x a float32 step on an AVX2-only AMD EPYC, and its
 convolution gradients there round more than once (measured: docs/benchmarks.md).
 
 :class:`Float32Products` computes the same thing with float32 kernels. A bfloat16 operand widens
 to float32 exactly, the product of two bfloat16 significands (8 bits each) is exact in float32's
 24, the sums accumulate in float32 and the result is rounded once to bfloat16: the semantics of
-the bfloat16 kernels, apart from the order of the float32 sums, which differs between any two
-kernels anyway (AMX against AVX-512 BF16, one thread against two). Everything else autocast runs in
-bfloat16 (the activations, the normalisations' inputs) stays as it is. Only training uses it
+the bfloat16 kernels, apart from the order of the float32 sums (which differs between any two
+kernels anyway: AMX against AVX-512 BF16, one thread against two) and denormal products, which the
+bfloat16 dot-product instructions flush to zero. Everything else autocast runs in bfloat16 (the
+activations, the normalisations' inputs) stays as it is; a training under it keeps its encoders
+NCHW, so those ops run their NCHW kernels (other summation orders again). Only training uses it
 (``softvt-train --bf16-products``); a policy samples with the native kernels, as every committed
 policy's evaluations did.
 
@@ -35,10 +37,11 @@ BF16_PRODUCTS = ("auto", "native", "float32")
 BF16_INSTRUCTIONS = ("avx512_bf16", "amx_bf16")
 
 _aten = torch.ops.aten
-# The operators autocast's bfloat16 products reach below autograd (conv1d/2d and linear decompose
-# into these), forward and backward.
-PRODUCTS = frozenset({_aten.convolution.default, _aten.convolution_backward.default, _aten.mm.default,
-                      _aten.addmm.default, _aten.bmm.default, _aten.baddbmm.default})
+# The operators autocast's bfloat16 products reach below autograd (conv1d/2d, transposed ones and
+# linear decompose into these), forward and backward; tests/test_baselines.py checks that a training
+# step of each variant reaches no other product.
+MATRIX_PRODUCTS = frozenset({_aten.mm.default, _aten.addmm.default, _aten.bmm.default, _aten.baddbmm.default})
+PRODUCTS = MATRIX_PRODUCTS | {_aten.convolution.default, _aten.convolution_backward.default}
 
 
 def has_bf16_instructions(flags: set[str] | None = None) -> bool:
@@ -65,16 +68,16 @@ def _widen(x, nchw: bool = False):
     return x.to(torch.float32, memory_format=torch.contiguous_format) if nchw else x.float()
 
 
-def _layout(like: torch.Tensor) -> torch.memory_format:
-    channels_last = like.dim() == 4 and like.is_contiguous(memory_format=torch.channels_last) and not like.is_contiguous()
-    return torch.channels_last if channels_last else torch.contiguous_format
+def _channels_last(t: torch.Tensor) -> bool:
+    return t.dim() == 4 and t.is_contiguous(memory_format=torch.channels_last) and not t.is_contiguous()
 
 
-def _round(x, like: torch.Tensor | None = None):
+def _round(x, *like: torch.Tensor):
+    """``x`` rounded to bfloat16, channels-last where any of ``like`` is (as torch's convolutions choose)."""
     if not isinstance(x, torch.Tensor):
         return x
     x = x.to(torch.bfloat16)
-    return x if like is None else x.contiguous(memory_format=_layout(like))
+    return x.contiguous(memory_format=torch.channels_last) if any(map(_channels_last, like)) else x
 
 
 class Float32Products(TorchDispatchMode):
@@ -90,8 +93,7 @@ class Float32Products(TorchDispatchMode):
         if func not in PRODUCTS or not any(isinstance(a, torch.Tensor) and a.dtype == torch.bfloat16 for a in args):
             return func(*args, **kwargs)
         self.calls += 1
-        if func is _aten.mm.default or func is _aten.addmm.default or func is _aten.bmm.default \
-                or func is _aten.baddbmm.default:
+        if func in MATRIX_PRODUCTS:
             return _round(func(*map(_widen, args), **{k: _widen(v) for k, v in kwargs.items()}))
         # Convolutions compute in float32 on NCHW operands (a training under this mode keeps its
         # encoders NCHW: no copies) and hand back the layouts they were given. torch 2.13's float32
@@ -99,6 +101,6 @@ class Float32Products(TorchDispatchMode):
         # tiny encoder's shortcut); its NCHW and bfloat16 kernels do not.
         out = func(*(_widen(a, nchw=True) for a in args), **kwargs)
         if func is _aten.convolution.default:
-            return _round(out, like=args[0])
+            return _round(out, args[0], args[1])
         grad_input, grad_weight, grad_bias = out
-        return _round(grad_input, like=args[1]), _round(grad_weight, like=args[2]), _round(grad_bias)
+        return _round(grad_input, args[1], args[2]), _round(grad_weight, args[1], args[2]), _round(grad_bias)

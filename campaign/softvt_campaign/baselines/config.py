@@ -35,7 +35,7 @@ Where this differs from the paper, and why:
 - ``paper`` is meant for a GPU (``device="cuda"``); it has not been run here.
 - ``cpu`` trains and samples in bfloat16 mixed precision (``precision="bf16"``: the encoders'
   and the U-Net's matrix products under ``torch.autocast``, the image encoders on channels-last
-  tensors; weights, optimiser, normalisers, the spatial softmax and the loss stay float32). On
+  tensors (NCHW in a training whose products run on float32 kernels); weights, optimiser, normalisers, the spatial softmax and the loss stay float32). On
   this machine's AVX-512 BF16 cores a training step takes 0.61 of the float32 time
   (benchmarks/bench_train_step.py); on a CPU without bfloat16 instructions training computes the
   same products with float32 kernels (:mod:`.bf16`). ``precision="fp32"`` (NCHW images) is the

@@ -12,7 +12,9 @@ to continue). Writes under ``--out`` (default ``outputs/baselines/<suite>/<varia
 
 - ``checkpoint.pt``: everything to resume (weights, EMA, optimiser, schedule, random state,
   losses), rewritten atomically every ``checkpoint_every`` steps; re-running the same command
-  continues from it, and the result is bit for bit the one an uninterrupted run gives;
+  continues from it, and the result is bit for bit the one an uninterrupted run gives (on a
+  machine of the same kind, with the same ``--bf16-products``: a run resumed with the other kind
+  trains each stretch its own way, and ``bf16_product_steps`` counts them);
 - ``policy.pt``: the EMA weights and the config, what ``evaluate --policy <path>`` loads;
 - with ``--snapshot-every N``, ``snapshots/<run>_step<k>.pt``: the same at every N-th step (a
   policy each, for curves of error or TSR against training time);
@@ -314,7 +316,7 @@ def main(argv=None) -> Path:
     elif products == "float32":
         # No bfloat16 kernel runs, so every dispatch stays pinned.
         why = "asked for" if args.bf16_products == "float32" else "this CPU has no bfloat16 instructions"
-        print(f"note: bfloat16 products through float32 kernels ({why}; baselines/bf16.py), every dispatch pinned")
+        print(f"note: bfloat16 products through float32 kernels ({why}; baselines/bf16.py), nothing released")
     path = train(cfg, args.demos, out, snapshot_every=args.snapshot_every, deadline=deadline, cache=args.cache,
                  bf16_products=products or "native")
     print(f"{path}" if path.exists() else f"stopped before the end; re-run to resume from {out / CHECKPOINT}")

@@ -40,6 +40,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from ..baselines.agent import read_policy_file, resolve_policy_file
+from ..baselines.bf16 import choose_products
 from ..baselines.config import RECIPES, VARIANTS, parse_override, recipe_config, training_identity
 from ..baselines.train import POLICY, save, snapshot_path, train
 from mani_skill_softvt.evaluation.metrics import percent_ci, summarize
@@ -311,8 +312,11 @@ def main(argv=None) -> str:
             policy = run / "policy.pt"
             print(f"{label}: the weights of {source.name} (the recipes differ in how they sample only)")
         else:
+            # float32 products where the CPU lacks bfloat16 instructions (no bfloat16 kernel to release);
+            # elsewhere the native kernels, under this process's numerics as before.
+            products = choose_products("auto", configs[recipe].precision) or "native"
             policy = train(configs[recipe], args.demos, run, deadline=deadline, snapshot_every=args.snapshot_every,
-                           cache=cache)
+                           cache=cache, bf16_products=products)
             trained[training_identity(configs[recipe])] = run
         for line in measure_snapshots(args.variant, label, run, configs[recipe], args.demos, args.results, args.windows,
                                       args.threads, cache):
